@@ -1,0 +1,9 @@
+//! Rigid multibody dynamics of the PRBM chain in reduced (joint) coordinates.
+
+pub mod aba;
+pub mod crba;
+pub mod rnea;
+
+pub use aba::aba;
+pub use crba::crba;
+pub use rnea::{forward_pass, rnea, BodyMotion};

@@ -1,0 +1,116 @@
+//! Forward dynamics of the arm with its drive: q̈ = f(t, q, q̇).
+//!
+//! `(M(q) + diag(armature) + h·C_free) q̈ = τ_drive + τ_passive − b(q, q̇)`, where `b` is the
+//! RNEA bias (Coriolis, centrifugal, gravity), `τ_passive = −k δ − c δ̇` on bending joints
+//! and `h` is the implicit-damping step of the semi-implicit integrator (0 for RK4). In
+//! replay the motor rows are replaced by the prescribed accelerations, so the same
+//! Cholesky solve gives the bending accelerations with the motors following the encoders.
+
+use crate::drive::Drive;
+use crate::dynamics::{crba, rnea};
+use crate::math::{MatN, VecN, NV};
+use crate::model::Model;
+use crate::params::ParamData;
+
+/// Passive joint forces `−k δ − c δ̇` on the bending joints [N·m] (respecting `disable`).
+#[inline]
+pub fn passive(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> VecN {
+    let d = &model.options.disable;
+    let mut t = VecN::zeros();
+    for &b in &model.bend_idx {
+        let mut f = 0.0;
+        if !d.spring {
+            f -= pd.k[b] * q[b];
+        }
+        if !d.damper {
+            f -= pd.c[b] * v[b];
+        }
+        t[b] = f;
+    }
+    t
+}
+
+/// Damping coefficients on the free (bending) joints, for implicit damping.
+#[inline]
+pub fn damping_diag(model: &Model, pd: &ParamData) -> VecN {
+    let mut c = VecN::zeros();
+    if !model.options.disable.damper {
+        for &b in &model.bend_idx {
+            c[b] = pd.c[b];
+        }
+    }
+    c
+}
+
+/// In replay, overwrite the motor coordinates of `q`, `v` with the encoder spline at `t`
+/// and return the prescribed motor accelerations; in torque drive return `None`.
+#[inline]
+pub fn prescribe(model: &Model, drive: &Drive, t: f64, q: &mut VecN, v: &mut VecN) -> Option<[f64; 3]> {
+    match drive {
+        Drive::Replay(s) => {
+            let (qm, vm, am) = s.eval(t);
+            for (k, &i) in model.motor_idx.iter().enumerate() {
+                q[i] = qm[k];
+                v[i] = vm[k];
+            }
+            Some(am)
+        }
+        Drive::Torque(_) => None,
+    }
+}
+
+/// Joint accelerations at time `t` [rad/s²]. `q`, `v` must already be prescribed for
+/// replay (see [`prescribe`]); `h_implicit` is 0 for explicit evaluation.
+#[inline]
+pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64) -> VecN {
+    let rot = model.rotations(q);
+    let mut m: MatN = crba(model, &pd.body, &rot);
+    let b = rnea(model, &pd.body, &rot, v, &VecN::zeros(), &model.gravity);
+    let mut rhs = passive(model, pd, q, v) - b;
+    for i in 0..NV {
+        m[(i, i)] += model.armature[i];
+    }
+    if h_implicit > 0.0 {
+        let c = damping_diag(model, pd);
+        for i in 0..NV {
+            m[(i, i)] += h_implicit * c[i];
+        }
+    }
+    match (drive, am) {
+        (Drive::Torque(sig), _) => {
+            let tau = sig.eval(t);
+            for (k, &i) in model.motor_idx.iter().enumerate() {
+                rhs[i] += tau[k];
+            }
+        }
+        (Drive::Replay(_), Some(am)) => {
+            for (k, &p) in model.motor_idx.iter().enumerate() {
+                for f in 0..NV {
+                    rhs[f] -= m[(f, p)] * am[k];
+                }
+            }
+            for (k, &p) in model.motor_idx.iter().enumerate() {
+                for f in 0..NV {
+                    m[(f, p)] = 0.0;
+                    m[(p, f)] = 0.0;
+                }
+                m[(p, p)] = 1.0;
+                rhs[p] = am[k];
+            }
+        }
+        (Drive::Replay(_), None) => unreachable!("replay accelerations must be prescribed"),
+    }
+    match m.cholesky() {
+        Some(ch) => ch.solve(&rhs),
+        None => VecN::from_element(f64::NAN),
+    }
+}
+
+/// Motor torques at the joint outputs for a motion (q, q̇, q̈): the link-side torque the
+/// reducers deliver, armature excluded [N·m].
+#[inline]
+pub fn motor_torques(model: &Model, pd: &ParamData, q: &VecN, v: &VecN, qdd: &VecN) -> [f64; 3] {
+    let rot = model.rotations(q);
+    let tau = rnea(model, &pd.body, &rot, v, qdd, &model.gravity);
+    std::array::from_fn(|k| tau[model.motor_idx[k]])
+}

@@ -1,0 +1,45 @@
+//! Batched rollouts: many (params, run) pairs at once, in parallel.
+//!
+//! Job `b` writes only result `b`, and each job is a plain sequential run, so the output
+//! is bit-identical to running the jobs one by one, for any thread count.
+
+use crate::error::Result;
+use crate::model::Model;
+use crate::params::{ParamData, Params};
+use crate::sim::{run, RunConfig, Trajectory};
+
+/// One job of a batch.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Job {
+    /// Parameters of this rollout.
+    pub params: Params,
+    /// What to run.
+    pub run: RunConfig,
+}
+
+/// Run one job.
+///
+/// # Errors
+/// As [`ParamData::new`] and [`run`].
+pub fn run_job(model: &Model, job: &Job) -> Result<Trajectory> {
+    let pd = ParamData::new(model, &job.params)?;
+    run(model, &pd, &job.run)
+}
+
+/// Run a batch on `threads` threads (0 = all cores; 1 = sequential on this thread).
+/// Results are in job order.
+pub fn rollout(model: &Model, jobs: &[Job], threads: usize) -> Vec<Result<Trajectory>> {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        if threads != 1 && jobs.len() > 1 {
+            let go = || jobs.par_iter().map(|j| run_job(model, j)).collect::<Vec<_>>();
+            return match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+                Ok(pool) => pool.install(go),
+                Err(_) => go(),
+            };
+        }
+    }
+    let _ = threads;
+    jobs.iter().map(|j| run_job(model, j)).collect()
+}

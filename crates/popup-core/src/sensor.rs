@@ -1,0 +1,104 @@
+//! Sensor outputs: the channels a measured run may contain, computed from (q, q̇, q̈).
+//!
+//! Channel names match the measured-run format (`measured-run.md`) where one exists.
+//! IMUs read specific force `a − g` at their mount in the mount body's axes; the bending
+//! moment of joint j is `k δ_j + c δ̇_j`; `m*_ratio` is |M| of the link's universal joint
+//! (both axes combined) over the wrinkling-onset moment M_w = coef · p · r³.
+
+use crate::dynamics::forward_pass;
+use crate::forward::motor_torques;
+use crate::kinematics::prbm::frames;
+use crate::math::{Vec3, VecN, NV};
+use crate::model::Model;
+use crate::params::ParamData;
+
+/// Number of output channels.
+pub const NCH: usize = 36;
+
+/// Output channel names, in column order. Units: s, rad, rad/s, N·m, m, m/s², Pa, rad,
+/// rad/s, N·m, 1 (ratio), J.
+pub const CHANNELS: [&str; NCH] = [
+    "t", "q1", "q2", "q3", "dq1", "dq2", "dq3", "tau1", "tau2", "tau3", "ee_x", "ee_y", "ee_z", "imu1_ax", "imu1_ay", "imu1_az", "imu2_ax",
+    "imu2_ay", "imu2_az", "p1", "p2", "d11", "d12", "d21", "d22", "dd11", "dd12", "dd21", "dd22", "m11", "m12", "m21", "m22", "m1_ratio",
+    "m2_ratio", "energy",
+];
+
+/// Units of [`CHANNELS`], same order.
+pub const UNITS: [&str; NCH] = [
+    "s", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s", "N·m", "N·m", "N·m", "m", "m", "m", "m/s²", "m/s²", "m/s²", "m/s²", "m/s²", "m/s²",
+    "Pa", "Pa", "rad", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s", "rad/s", "N·m", "N·m", "N·m", "N·m", "1", "1", "J",
+];
+
+/// Column index of a channel name.
+pub fn channel_index(name: &str) -> Option<usize> {
+    CHANNELS.iter().position(|c| *c == name)
+}
+
+/// Bending moments `k δ + c δ̇` of the four bending joints [N·m] and |M|/M_w per link.
+#[inline]
+pub fn bending_moments(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> ([f64; 4], [f64; 2]) {
+    let d = &model.options.disable;
+    let mut m = [0.0; 4];
+    let mut sq = [0.0; 2];
+    for (a, &b) in model.bend_idx.iter().enumerate() {
+        let ks = if d.spring { 0.0 } else { pd.k[b] };
+        let cs = if d.damper { 0.0 } else { pd.c[b] };
+        m[a] = ks * q[b] + cs * v[b];
+        sq[model.joints[b].link] += m[a] * m[a];
+    }
+    let ratio = std::array::from_fn(|l| if pd.mw[l] > 0.0 { sq[l].sqrt() / pd.mw[l] } else { f64::INFINITY });
+    (m, ratio)
+}
+
+/// Total mechanical energy: kinetic (armature included) + gravity + spring [J].
+pub fn energy(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> f64 {
+    let m = crate::statics::mass_matrix(model, pd, q);
+    let kin = 0.5 * v.dot(&(m * v));
+    let f = frames(model, q);
+    let mut pot = 0.0;
+    for i in 0..NV {
+        let b = &pd.body[i];
+        let mc_w = f.p_wb[i + 1] * b.m + f.r_wb[i + 1] * b.h;
+        pot -= model.gravity.dot(&mc_w);
+    }
+    if !model.options.disable.spring {
+        for &b in &model.bend_idx {
+            pot += 0.5 * pd.k[b] * q[b] * q[b];
+        }
+    }
+    kin + pot
+}
+
+/// Fill one output row at time `t` for state (q, q̇) with accelerations q̈.
+pub fn sample(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, qdd: &VecN, row: &mut [f64]) {
+    let rot = model.rotations(q);
+    let bm = forward_pass(model, &rot, v, qdd, &(-model.gravity));
+    let fr = frames(model, q);
+    let tau = motor_torques(model, pd, q, v, qdd);
+    row[0] = t;
+    for k in 0..3 {
+        let i = model.motor_idx[k];
+        row[1 + k] = q[i];
+        row[4 + k] = v[i];
+        row[7 + k] = tau[k];
+    }
+    let ee = fr.point(model.ee.0 + 1, &model.ee.1);
+    row[10..13].copy_from_slice(ee.as_slice());
+    for s in 0..2 {
+        let (b, p) = &model.imu[s];
+        let (w, wd, a) = (bm.w[*b], bm.wd[*b], bm.a[*b]);
+        let f: Vec3 = a + wd.cross(p) + w.cross(&w.cross(p));
+        row[13 + 3 * s..16 + 3 * s].copy_from_slice(f.as_slice());
+    }
+    row[19] = pd.params.pressure_pa[0];
+    row[20] = pd.params.pressure_pa[1];
+    let (mom, ratio) = bending_moments(model, pd, q, v);
+    for (a, &b) in model.bend_idx.iter().enumerate() {
+        row[21 + a] = q[b];
+        row[25 + a] = v[b];
+        row[29 + a] = mom[a];
+    }
+    row[33] = ratio[0];
+    row[34] = ratio[1];
+    row[35] = energy(model, pd, q, v);
+}

@@ -1,0 +1,265 @@
+//! Running the arm: initial state, pre-run step-size check, the fixed-step loop with
+//! divergence detection, sampling of the sensor channels and the wrinkling alarm log.
+
+use crate::drive::Drive;
+use crate::error::{Error, Result};
+use crate::forward::{accel, prescribe};
+use crate::integrate::step;
+use crate::math::{VecN, NV};
+use crate::model::{Integrator, Model};
+use crate::params::ParamData;
+use crate::sensor::{bending_moments, sample, NCH};
+use crate::statics::{linear_eigs, static_equilibrium};
+
+/// Joint speed above which a run is declared unstable [rad/s].
+pub const MAX_JOINT_SPEED: f64 = 1e4;
+
+/// Mechanical state: time and joint coordinates/rates of the chain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct State {
+    /// Time [s].
+    pub t: f64,
+    /// Joint coordinates, chain order [rad].
+    pub q: VecN,
+    /// Joint rates [rad/s].
+    pub v: VecN,
+}
+
+/// One wrinkling-alarm episode: |M|/M_w of a link above 1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Alarm {
+    /// Link (1 or 2).
+    pub link: usize,
+    /// Time the moment first exceeded M_w [s].
+    pub t_start: f64,
+    /// Time it fell back below (NaN if still above at the end) [s].
+    pub t_end: f64,
+    /// Peak |M|/M_w during the episode.
+    pub peak_ratio: f64,
+}
+
+/// Result of one run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trajectory {
+    /// Samples, row-major (nsample × [`NCH`]), columns as [`crate::sensor::CHANNELS`].
+    pub data: Vec<f64>,
+    /// Number of samples.
+    pub nsample: usize,
+    /// Wrinkling-alarm episodes in time order.
+    pub alarms: Vec<Alarm>,
+    /// State at the end of the run.
+    pub final_state: State,
+    /// Warnings (pressure clamped, ...).
+    pub warnings: Vec<String>,
+}
+
+/// What to run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunConfig {
+    /// Drive of the motor joints.
+    pub drive: Drive,
+    /// Initial state; `None` = at rest, motors at the drive's first sample (replay) or at
+    /// zero (torque), bending joints in static equilibrium.
+    pub initial: Option<State>,
+    /// Duration [s]; `None` = the replay's span (required for torque drive).
+    pub duration: Option<f64>,
+    /// Sensor sample period [s]; must be a whole multiple of the model's dt.
+    pub sample_period: f64,
+    /// Check the step size against the linearised arm before running (default true).
+    pub check_step: bool,
+}
+
+/// Initial state at rest with the motors at `qm` and the bending joints in static
+/// equilibrium.
+///
+/// # Errors
+/// As [`static_equilibrium`].
+pub fn rest_state(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result<State> {
+    let mut q = VecN::zeros();
+    for (k, &i) in model.motor_idx.iter().enumerate() {
+        q[i] = qm[k];
+    }
+    let q = static_equilibrium(model, pd, &q)?;
+    Ok(State { t, q, v: VecN::zeros() })
+}
+
+/// Check `dt` against the linearised arm about `q` (free joints: all in torque drive,
+/// bending joints in replay).
+///
+/// # Errors
+/// [`Error::StepTooLarge`] naming the mode, its joint and the largest stable step.
+pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Result<()> {
+    let free: Vec<usize> = if replay { model.bend_idx.to_vec() } else { (0..NV).collect() };
+    let eigs = linear_eigs(model, pd, q, &free);
+    let h = model.options.dt;
+    let integ = model.options.integrator;
+    // per-mode largest stable step
+    let stable_at = |lam: nalgebra::Complex<f64>, h: f64| -> bool {
+        match integ {
+            Integrator::Rk4 => {
+                let z = lam * h;
+                let r = nalgebra::Complex::new(1.0, 0.0) + z + z * z / 2.0 + z * z * z / 6.0 + z * z * z * z / 24.0;
+                r.norm() <= 1.0 + 1e-12
+            }
+            Integrator::SemiImplicit => h * lam.norm() < 2.0,
+        }
+    };
+    let mut worst: Option<(f64, nalgebra::Complex<f64>, usize)> = None;
+    for (lam, joint) in eigs {
+        if lam.re > 1e-9 * lam.norm().max(1.0) {
+            continue; // statically unstable direction: no step makes it decay
+        }
+        if lam.norm() == 0.0 || stable_at(lam, h) {
+            continue;
+        }
+        let (mut lo, mut hi) = (0.0, h);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if stable_at(lam, mid) {
+                lo = mid
+            } else {
+                hi = mid
+            }
+        }
+        if worst.map_or(true, |w| lo < w.0) {
+            worst = Some((lo, lam, joint));
+        }
+    }
+    if let Some((dt_max, lam, joint)) = worst {
+        return Err(Error::StepTooLarge {
+            dt: h,
+            dt_max: (dt_max * 0.95 * 1e9).floor() / 1e9,
+            integrator: integ.name().into(),
+            detail: format!(
+                "the mode at |λ| = {:.1} rad/s (ζ = {:.3}) dominated by joint {} falls outside its stability region",
+                lam.norm(),
+                -lam.re / lam.norm(),
+                model.joint_name(joint)
+            ),
+        });
+    }
+    Ok(())
+}
+
+fn diverged(model: &Model, k: usize, t: f64, q: &VecN, v: &VecN) -> Option<Error> {
+    let mut worst: Option<(usize, String)> = None;
+    let mut vmax = 0.0;
+    for i in 0..NV {
+        if !q[i].is_finite() || !v[i].is_finite() {
+            worst = Some((i, format!("q = {} rad, v = {} rad/s (non-finite)", q[i], v[i])));
+            break;
+        }
+        if v[i].abs() > MAX_JOINT_SPEED && v[i].abs() > vmax {
+            vmax = v[i].abs();
+            worst = Some((i, format!("|v| = {:.3e} rad/s > {MAX_JOINT_SPEED:e} rad/s", v[i].abs())));
+        }
+    }
+    worst.map(|(i, quantity)| Error::Diverged {
+        step: k,
+        time: t,
+        joint: model.joint_name(i).to_string(),
+        quantity,
+        advice: format!(
+            "reduce dt (now {:e} s) or switch integrator (now {}), and check the inputs (torques, encoder samples) near this time",
+            model.options.dt,
+            model.options.integrator.name()
+        ),
+    })
+}
+
+/// Run one simulation.
+///
+/// # Errors
+/// Bad config ([`Error::Input`]), [`Error::StepTooLarge`], [`Error::Diverged`], or the
+/// static-equilibrium error for the initial state.
+pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory> {
+    let dt = model.options.dt;
+    let (t0, duration) = match (&cfg.drive, cfg.duration) {
+        (Drive::Replay(s), d) => {
+            let (a, b) = s.span();
+            (a, d.unwrap_or(b - a))
+        }
+        (Drive::Torque(_), Some(d)) => (cfg.initial.map_or(0.0, |s| s.t), d),
+        (Drive::Torque(_), None) => return Err(Error::input("duration", "a torque-driven run needs a duration")),
+    };
+    if !(duration.is_finite() && duration >= 0.0) {
+        return Err(Error::input("duration", format!("{duration} s must be finite and >= 0")));
+    }
+    if !(cfg.sample_period.is_finite() && cfg.sample_period > 0.0) {
+        return Err(Error::input("sample_period", format!("{} s must be finite and > 0", cfg.sample_period)));
+    }
+    let every = (cfg.sample_period / dt).round().max(1.0) as usize;
+    if ((every as f64) * dt - cfg.sample_period).abs() > 1e-9 * cfg.sample_period {
+        return Err(Error::input(
+            "sample_period",
+            format!("{} s is not a whole multiple of dt = {dt} s (sample rate must divide the physics rate)", cfg.sample_period),
+        ));
+    }
+    let nstep = (duration / dt + 1e-9).floor() as usize;
+    let mut st = match cfg.initial {
+        Some(s) => {
+            for i in 0..NV {
+                if !s.q[i].is_finite() || !s.v[i].is_finite() {
+                    return Err(Error::input("initial state", format!("joint {} has q = {}, v = {}", model.joint_name(i), s.q[i], s.v[i])));
+                }
+            }
+            s
+        }
+        None => {
+            let qm = match &cfg.drive {
+                Drive::Replay(s) => s.eval(t0).0,
+                Drive::Torque(_) => [0.0; 3],
+            };
+            rest_state(model, pd, t0, qm)?
+        }
+    };
+    st.t = t0;
+    prescribe(model, &cfg.drive, t0, &mut st.q, &mut st.v);
+    if cfg.check_step {
+        check_step(model, pd, &st.q, cfg.drive.is_replay())?;
+    }
+    let nsample = nstep / every + 1;
+    let mut data = vec![0.0; nsample * NCH];
+    let mut alarms: Vec<Alarm> = Vec::new();
+    let mut open: [Option<usize>; 2] = [None, None];
+    let write = |k: usize, st: &State, data: &mut Vec<f64>| {
+        let mut q = st.q;
+        let mut v = st.v;
+        let am = prescribe(model, &cfg.drive, st.t, &mut q, &mut v);
+        let qdd = accel(model, pd, &cfg.drive, st.t, &q, &v, am, 0.0);
+        let r = k / every;
+        sample(model, pd, st.t, &q, &v, &qdd, &mut data[r * NCH..(r + 1) * NCH]);
+    };
+    let mut track = |st: &State, alarms: &mut Vec<Alarm>| {
+        let (_, ratio) = bending_moments(model, pd, &st.q, &st.v);
+        for l in 0..2 {
+            match open[l] {
+                None if ratio[l] > 1.0 => {
+                    open[l] = Some(alarms.len());
+                    alarms.push(Alarm { link: l + 1, t_start: st.t, t_end: f64::NAN, peak_ratio: ratio[l] });
+                }
+                Some(a) if ratio[l] > 1.0 => alarms[a].peak_ratio = alarms[a].peak_ratio.max(ratio[l]),
+                Some(a) => {
+                    alarms[a].t_end = st.t;
+                    open[l] = None;
+                }
+                None => {}
+            }
+        }
+    };
+    write(0, &st, &mut data);
+    track(&st, &mut alarms);
+    for k in 0..nstep {
+        let t = t0 + k as f64 * dt;
+        step(model, pd, &cfg.drive, t, dt, &mut st.q, &mut st.v);
+        st.t = t0 + (k + 1) as f64 * dt;
+        if let Some(e) = diverged(model, k, t, &st.q, &st.v) {
+            return Err(e);
+        }
+        track(&st, &mut alarms);
+        if (k + 1) % every == 0 {
+            write(k + 1, &st, &mut data);
+        }
+    }
+    Ok(Trajectory { data, nsample, alarms, final_state: st, warnings: pd.warnings.clone() })
+}

@@ -1,0 +1,145 @@
+//! Statics and linearisation: static equilibrium of the bending joints, gravity stiffness,
+//! locked-motor modes and the eigenvalues used by the step-size check.
+
+use crate::dynamics::{crba, rnea};
+use crate::error::{Error, Result};
+use crate::forward::damping_diag;
+use crate::math::{MatN, VecN, NB, NV};
+use crate::model::Model;
+use crate::params::ParamData;
+use nalgebra::{Complex, DMatrix, SMatrix, SVector};
+
+/// Generalised gravity forces G(q) = ∂V/∂q [N·m].
+pub fn gravity_torque(model: &Model, pd: &ParamData, q: &VecN) -> VecN {
+    let rot = model.rotations(q);
+    rnea(model, &pd.body, &rot, &VecN::zeros(), &VecN::zeros(), &model.gravity)
+}
+
+/// Joint-space stiffness K = diag(k) + ∂G/∂q at `q` (central differences of G, symmetrised)
+/// [N·m/rad].
+pub fn stiffness(model: &Model, pd: &ParamData, q: &VecN) -> MatN {
+    let h = 1e-6;
+    let mut k = MatN::zeros();
+    for j in 0..NV {
+        let mut qp = *q;
+        let mut qm = *q;
+        qp[j] += h;
+        qm[j] -= h;
+        let col = (gravity_torque(model, pd, &qp) - gravity_torque(model, pd, &qm)) / (2.0 * h);
+        k.set_column(j, &col);
+    }
+    k = (k + k.transpose()) * 0.5;
+    if !model.options.disable.spring {
+        for &b in &model.bend_idx {
+            k[(b, b)] += pd.k[b];
+        }
+    }
+    k
+}
+
+/// Mass matrix with armature [kg·m²].
+pub fn mass_matrix(model: &Model, pd: &ParamData, q: &VecN) -> MatN {
+    let rot = model.rotations(q);
+    let mut m = crba(model, &pd.body, &rot);
+    for i in 0..NV {
+        m[(i, i)] += model.armature[i];
+    }
+    m
+}
+
+fn sub<const N: usize>(m: &MatN, idx: &[usize; N]) -> SMatrix<f64, N, N> {
+    SMatrix::from_fn(|i, j| m[(idx[i], idx[j])])
+}
+
+/// Static equilibrium of the bending joints with the motor joints held at the motor
+/// coordinates of `q`: solves `G_b(q) + k δ = 0` by Newton's method. Returns q with the
+/// bending coordinates at equilibrium (starting from those of `q`).
+///
+/// # Errors
+/// [`Error::NoConvergence`] if Newton fails (e.g. springs too weak to hold the arm).
+pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<VecN> {
+    let mut x = *q;
+    let bi = model.bend_idx;
+    for it in 0..50 {
+        let g = gravity_torque(model, pd, &x);
+        let mut r = SVector::<f64, NB>::zeros();
+        for (a, &b) in bi.iter().enumerate() {
+            let spring = if model.options.disable.spring { 0.0 } else { pd.k[b] * x[b] };
+            r[a] = g[b] + spring;
+        }
+        let kk = sub(&stiffness(model, pd, &x), &bi);
+        let dx = kk.lu().solve(&r).ok_or_else(|| Error::NoConvergence {
+            what: "static equilibrium".into(),
+            message: "the bending stiffness matrix is singular (springs disabled or zero?)".into(),
+        })?;
+        for (a, &b) in bi.iter().enumerate() {
+            x[b] -= dx[a];
+        }
+        if dx.amax() < 1e-14 && it > 0 {
+            return Ok(x);
+        }
+        if !dx.amax().is_finite() || dx.amax() > 10.0 {
+            break;
+        }
+    }
+    Err(Error::NoConvergence {
+        what: "static equilibrium".into(),
+        message: format!(
+            "Newton iteration on the bending joints did not converge (payload {} kg, pressures {:?} Pa): the springs may be too weak for the load",
+            pd.params.payload_kg, pd.params.pressure_pa
+        ),
+    })
+}
+
+/// Undamped natural frequencies of the bending joints with the motors locked, about `q`
+/// (spring plus gravity stiffness), ascending [rad/s]. A negative entry means a statically
+/// unstable direction (−√|λ|).
+pub fn locked_modes(model: &Model, pd: &ParamData, q: &VecN) -> [f64; NB] {
+    let bi = model.bend_idx;
+    let m = sub(&mass_matrix(model, pd, q), &bi);
+    let k = sub(&stiffness(model, pd, q), &bi);
+    let l = m.cholesky().expect("bending mass matrix is positive definite").l();
+    let li = l.try_inverse().expect("invertible");
+    let a = li * k * li.transpose();
+    let a = (a + a.transpose()) * 0.5;
+    let mut ev: Vec<f64> = a.symmetric_eigen().eigenvalues.iter().map(|&l| if l >= 0.0 { l.sqrt() } else { -(-l).sqrt() }).collect();
+    ev.sort_by(|x, y| x.partial_cmp(y).unwrap());
+    [ev[0], ev[1], ev[2], ev[3]]
+}
+
+/// Eigenvalues of the linearised first-order system about `(q, 0)` over the free joints
+/// (`free`: joints that are integrated), with the integrator's view of damping [1/s].
+/// Returns (eigenvalue, index of the joint that dominates its eigenvector).
+pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize]) -> Vec<(Complex<f64>, usize)> {
+    let n = free.len();
+    let mm = mass_matrix(model, pd, q);
+    let kk = stiffness(model, pd, q);
+    let cc = damping_diag(model, pd);
+    let m = DMatrix::from_fn(n, n, |i, j| mm[(free[i], free[j])]);
+    let k = DMatrix::from_fn(n, n, |i, j| kk[(free[i], free[j])]);
+    let c = DMatrix::from_fn(n, n, |i, j| if i == j { cc[free[i]] } else { 0.0 });
+    let mi = m.clone().try_inverse().expect("mass matrix invertible");
+    let mut a = DMatrix::zeros(2 * n, 2 * n);
+    for i in 0..n {
+        a[(i, n + i)] = 1.0;
+    }
+    a.view_mut((n, 0), (n, n)).copy_from(&(-&mi * &k));
+    a.view_mut((n, n), (n, n)).copy_from(&(-&mi * &c));
+    let eig = a.clone().complex_eigenvalues();
+    let mut out = Vec::with_capacity(2 * n);
+    for lam in eig.iter() {
+        // dominant joint: inverse iteration would be exact; the largest diagonal share of
+        // (K + |λ|² M)-weighted participation is enough to name it
+        let w2 = lam.norm_sqr();
+        let mut best = (0usize, f64::NEG_INFINITY);
+        for i in 0..n {
+            let s = (k[(i, i)] - w2 * m[(i, i)]).abs();
+            let score = -s / (k[(i, i)].abs() + w2 * m[(i, i)] + 1e-300);
+            if score > best.1 {
+                best = (i, score);
+            }
+        }
+        out.push((*lam, free[best.0]));
+    }
+    out
+}
