@@ -1,1 +1,27 @@
+//! `popup._core`: thin PyO3 bindings of `popup-core`. The public Python API lives in the
+//! `popup` package; this module mirrors the core's types (`PyArm` → `Arm`, `PyModel` →
+//! `Model`, `PyRigidArm` → `RigidArm`).
 
+mod arm;
+mod errors;
+mod model;
+
+use pyo3::prelude::*;
+
+/// Raise an exception of the given `popup.exceptions` class from a core error description.
+#[pyfunction]
+fn _raise(py: Python<'_>, cls: &str, msg: &str) -> PyResult<()> {
+    Err(errors::make(py, cls, msg))
+}
+
+#[pymodule(gil_used = false)]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<arm::PyArm>()?;
+    m.add_class::<arm::PyRigidArm>()?;
+    m.add_class::<model::PyModel>()?;
+    m.add_function(wrap_pyfunction!(_raise, m)?)?;
+    m.add("__version__", popup_core::VERSION)?;
+    m.add("BUILD_PROFILE", if cfg!(debug_assertions) { "debug" } else { "release" })?;
+    m.add("BUILD_FEATURES", popup_core::BUILD_FEATURES.to_vec())?;
+    Ok(())
+}

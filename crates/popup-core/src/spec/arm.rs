@@ -365,6 +365,31 @@ impl ArmSpec {
         let spec: ArmSpec = merged.try_into().map_err(|e: toml::de::Error| err(e.to_string()))?;
         Ok(spec)
     }
+
+    /// A copy of this arm with `overrides` merged in (same merge rules as `base` files).
+    ///
+    /// # Errors
+    /// [`crate::Error::ArmFile`] when the result is not a valid arm description.
+    pub fn with_overrides(&self, overrides: toml::Table, source_name: &str) -> crate::Result<Self> {
+        let err = |m: String| crate::Error::ArmFile { source_name: source_name.into(), message: m };
+        let mut value = toml::Table::try_from(self).map_err(|e| err(e.to_string()))?;
+        merge(&mut value, overrides, "");
+        value.try_into().map_err(|e: toml::de::Error| err(e.to_string()))
+    }
+
+    /// The rigid 3-DOF arm of table `which` (`"as_built"`, thesis Table 1, or `"ik"`,
+    /// Table 2).
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidParameter`] for another name or non-finite numbers.
+    pub fn rigid_arm(&self, which: &str) -> crate::Result<crate::kinematics::rigid::RigidArm> {
+        let t = match which {
+            "as_built" => &self.rigid.as_built,
+            "ik" => &self.rigid.ik,
+            _ => return Err(crate::Error::param("rigid table", format!("{which:?}"), "must be \"as_built\" (thesis Table 1) or \"ik\" (Table 2)")),
+        };
+        crate::kinematics::rigid::RigidArm::new(&format!("{} rigid {which}", self.name), t.d, t.a, t.alpha, t.theta_offset)
+    }
 }
 
 fn merge(base: &mut toml::Table, over: toml::Table, _path: &str) {

@@ -1,0 +1,65 @@
+//! Helpers shared by the contract tests (deterministic RNG, runs, channel access).
+#![allow(dead_code)]
+
+use popup_core::drive::{Drive, Linear3};
+use popup_core::math::{VecN, NV};
+use popup_core::model::Model;
+use popup_core::sensor::{channel_index, NCH};
+use popup_core::sim::{State, Trajectory};
+
+/// xorshift64* — deterministic, no external crate.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    /// Uniform in [lo, hi).
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        let u = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        lo + (hi - lo) * u
+    }
+    pub fn vec(&mut self, lo: f64, hi: f64) -> VecN {
+        VecN::from_fn(|_, _| self.uniform(lo, hi))
+    }
+}
+
+/// Column `name` of a trajectory.
+pub fn col(tr: &Trajectory, name: &str) -> Vec<f64> {
+    let c = channel_index(name).unwrap_or_else(|| panic!("no channel {name}"));
+    (0..tr.nsample).map(|r| tr.data[r * NCH + c]).collect()
+}
+
+/// Constant motor torques as a drive.
+pub fn constant_torque(tau: [f64; 3]) -> Drive {
+    Drive::Torque(Linear3::new(&[0.0], &[tau]).unwrap())
+}
+
+/// Full joint state (q, v) of sample row `r` rebuilt from the channels.
+pub fn state_of_row(model: &Model, tr: &Trajectory, r: usize) -> State {
+    let row = &tr.data[r * NCH..(r + 1) * NCH];
+    let mut q = VecN::zeros();
+    let mut v = VecN::zeros();
+    for k in 0..3 {
+        q[model.motor_idx[k]] = row[1 + k];
+        v[model.motor_idx[k]] = row[4 + k];
+    }
+    for a in 0..4 {
+        q[model.bend_idx[a]] = row[21 + a];
+        v[model.bend_idx[a]] = row[25 + a];
+    }
+    State { t: row[0], q, v }
+}
+
+/// Max-abs difference of the joint coordinates of two states.
+pub fn qdiff(a: &State, b: &State) -> f64 {
+    (0..NV).map(|i| (a.q[i] - b.q[i]).abs()).fold(0.0, f64::max)
+}
+
+/// log2 of successive error ratios.
+pub fn orders(errs: &[f64]) -> Vec<f64> {
+    errs.windows(2).map(|w| (w[0] / w[1]).log2()).collect()
+}

@@ -1,0 +1,232 @@
+//! `Arm` (wraps `ArmSpec`) and `RigidArm` (rigid 3-DOF kinematics).
+
+use crate::errors::{make, IntoPy};
+use numpy::{PyArray1, PyArray2};
+use popup_core::kinematics::rigid::{Elbow, RigidArm, Shoulder};
+use popup_core::math::Vec3;
+use popup_core::spec::ArmSpec;
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+
+/// An arm description (the content of an arm file). Immutable; `with_overrides` returns
+/// a modified copy.
+#[pyclass(name = "Arm", module = "popup._core", frozen)]
+#[derive(Clone)]
+pub struct PyArm {
+    pub spec: ArmSpec,
+}
+
+fn to_toml_value(path: &str, obj: &Bound<'_, PyAny>) -> PyResult<toml::Value> {
+    let py = obj.py();
+    if obj.is_instance_of::<PyBool>() {
+        return Ok(toml::Value::Boolean(obj.extract()?));
+    }
+    if obj.is_instance_of::<PyInt>() {
+        return Ok(toml::Value::Float(obj.extract::<i64>()? as f64));
+    }
+    if obj.is_instance_of::<PyFloat>() {
+        return Ok(toml::Value::Float(obj.extract()?));
+    }
+    if obj.is_instance_of::<PyString>() {
+        return Ok(toml::Value::String(obj.extract()?));
+    }
+    if let Ok(d) = obj.cast::<PyDict>() {
+        let mut t = toml::Table::new();
+        for (k, v) in d.iter() {
+            let k: String = k.extract()?;
+            let p = format!("{path}.{k}");
+            t.insert(k, to_toml_value(&p, &v)?);
+        }
+        return Ok(toml::Value::Table(t));
+    }
+    if obj.is_instance_of::<PyList>() || obj.is_instance_of::<PyTuple>() || obj.hasattr("tolist")? {
+        let seq = if obj.hasattr("tolist")? { obj.call_method0("tolist")? } else { obj.clone() };
+        let mut a = Vec::new();
+        for (i, v) in seq.try_iter()?.enumerate() {
+            a.push(to_toml_value(&format!("{path}[{i}]"), &v?)?);
+        }
+        return Ok(toml::Value::Array(a));
+    }
+    Err(make(py, "ArmFileError", &format!("override {path}: cannot use a value of type {}", obj.get_type().name()?)))
+}
+
+/// Integer-valued keys of the arm schema (TOML integers, not floats).
+const INT_KEYS: &[&str] = &["link", "body"];
+
+fn fix_ints(v: &mut toml::Value) {
+    match v {
+        toml::Value::Table(t) => {
+            for (k, x) in t.iter_mut() {
+                if INT_KEYS.contains(&k.as_str()) {
+                    if let toml::Value::Float(f) = x {
+                        *x = toml::Value::Integer(*f as i64);
+                    }
+                }
+                fix_ints(x);
+            }
+        }
+        toml::Value::Array(a) => a.iter_mut().for_each(fix_ints),
+        _ => {}
+    }
+}
+
+#[pymethods]
+impl PyArm {
+    /// A built-in arm by name (`"popup-lab"`).
+    #[staticmethod]
+    fn builtin(name: &str) -> PyResult<Self> {
+        Ok(PyArm { spec: ArmSpec::builtin(name).py()? })
+    }
+
+    /// Names of the built-in arms.
+    #[staticmethod]
+    fn builtin_names() -> Vec<String> {
+        ArmSpec::BUILTIN.iter().map(|s| s.to_string()).collect()
+    }
+
+    /// Parse an arm file's text; `source` names it in error messages.
+    #[staticmethod]
+    #[pyo3(signature = (text, source = "<string>"))]
+    fn from_toml(text: &str, source: &str) -> PyResult<Self> {
+        Ok(PyArm { spec: ArmSpec::from_toml(text, source).py()? })
+    }
+
+    /// Load an arm file (TOML) from `path`.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Self> {
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| make(py, "ArmFileError", &format!("arm file {}: cannot read: {e}", path.display())))?;
+        Ok(PyArm { spec: ArmSpec::from_toml(&text, &path.display().to_string()).py()? })
+    }
+
+    /// Write the complete arm file (TOML) to `path`.
+    fn save(&self, py: Python<'_>, path: std::path::PathBuf) -> PyResult<()> {
+        std::fs::write(&path, self.spec.to_toml())
+            .map_err(|e| make(py, "ArmFileError", &format!("arm file {}: cannot write: {e}", path.display())))
+    }
+
+    /// The complete arm file (TOML).
+    fn to_toml(&self) -> String {
+        self.spec.to_toml()
+    }
+
+    /// A copy with nested overrides merged in (dicts merge by key, lists of dicts by index).
+    fn with_overrides(&self, overrides: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let mut v = to_toml_value("", overrides.as_any())?;
+        fix_ints(&mut v);
+        let t = match v {
+            toml::Value::Table(t) => t,
+            _ => unreachable!(),
+        };
+        Ok(PyArm { spec: self.spec.with_overrides(t, "<overrides>").py()? })
+    }
+
+    /// Arm name.
+    #[getter]
+    fn name(&self) -> String {
+        self.spec.name.clone()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Arm({:?})", self.spec.name)
+    }
+
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other.cast::<PyArm>().map(|o| o.get().spec == self.spec).unwrap_or(false)
+    }
+}
+
+/// Rigid 3-DOF kinematics (thesis Tables 1 and 2).
+#[pyclass(name = "RigidArm", module = "popup._core", frozen)]
+pub struct PyRigidArm {
+    pub arm: RigidArm,
+}
+
+fn vec3(p: [f64; 3]) -> Vec3 {
+    Vec3::new(p[0], p[1], p[2])
+}
+
+#[pymethods]
+impl PyRigidArm {
+    /// The rigid table `table` (`"as_built"` = Table 1, `"ik"` = Table 2) of `arm`.
+    #[new]
+    #[pyo3(signature = (arm, table = "as_built"))]
+    fn new(arm: PyRef<'_, PyArm>, table: &str) -> PyResult<Self> {
+        Ok(PyRigidArm { arm: arm.spec.rigid_arm(table).py()? })
+    }
+
+    /// Name of the table.
+    #[getter]
+    fn name(&self) -> String {
+        self.arm.name.clone()
+    }
+
+    /// End-effector position p_WE [m] for joint angles q [rad].
+    fn fk<'py>(&self, py: Python<'py>, q: [f64; 3]) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, self.arm.fk(&q).as_slice())
+    }
+
+    /// Geometric Jacobian (6 × 3): rows linear then angular velocity, base frame.
+    fn jacobian<'py>(&self, py: Python<'py>, q: [f64; 3]) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let j = self.arm.jacobian(&q);
+        let rows: Vec<Vec<f64>> = (0..6).map(|r| (0..3).map(|c| j[(r, c)]).collect()).collect();
+        Ok(PyArray2::from_vec2(py, &rows)?)
+    }
+
+    /// The four closed-form IK solutions as (q, shoulder, elbow) tuples.
+    fn ik(&self, p: [f64; 3]) -> PyResult<Vec<([f64; 3], &'static str, &'static str)>> {
+        let sols = self.arm.ik(&vec3(p)).py()?;
+        Ok(sols
+            .iter()
+            .map(|s| {
+                let sh = match s.shoulder {
+                    Shoulder::Front => "front",
+                    Shoulder::Back => "back",
+                };
+                let el = match s.elbow {
+                    Elbow::Up => "up",
+                    Elbow::Down => "down",
+                };
+                (s.q, sh, el)
+            })
+            .collect())
+    }
+
+    /// Singularity report: dict(elbow, shoulder, elbow_measure, shoulder_measure).
+    #[pyo3(signature = (q, tol = 1e-6))]
+    fn singularity<'py>(&self, py: Python<'py>, q: [f64; 3], tol: f64) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.arm.singularity(&q, tol);
+        let d = PyDict::new(py);
+        d.set_item("elbow", s.elbow)?;
+        d.set_item("shoulder", s.shoulder)?;
+        d.set_item("elbow_measure", s.elbow_measure)?;
+        d.set_item("shoulder_measure", s.shoulder_measure)?;
+        Ok(d)
+    }
+
+    /// |det J_v| [m³].
+    fn manipulability(&self, q: [f64; 3]) -> f64 {
+        self.arm.manipulability(&q)
+    }
+
+    /// Raise `UnreachableError` if p [m] is outside the workspace.
+    fn check_reachable(&self, p: [f64; 3]) -> PyResult<()> {
+        self.arm.in_workspace(&vec3(p)).py()
+    }
+
+    /// Frames 0..3 as a (4, 4, 4) array of homogeneous transforms T_W_i.
+    fn frames<'py>(&self, py: Python<'py>, q: [f64; 3]) -> Bound<'py, numpy::PyArray3<f64>> {
+        let f = self.arm.frames(&q);
+        let mut out = numpy::ndarray::Array3::<f64>::zeros((4, 4, 4));
+        for (i, (r, p)) in f.iter().enumerate() {
+            for a in 0..3 {
+                for b in 0..3 {
+                    out[[i, a, b]] = r[(a, b)];
+                }
+                out[[i, a, 3]] = p[a];
+            }
+            out[[i, 3, 3]] = 1.0;
+        }
+        numpy::PyArray3::from_owned_array(py, out)
+    }
+}

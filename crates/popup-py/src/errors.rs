@@ -1,0 +1,57 @@
+//! Maps `popup_core::Error` variants onto the Python exception hierarchy of
+//! `popup.exceptions` (all derive from `PopupError` and the matching built-in).
+
+use popup_core::Error;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+fn class_name(e: &Error) -> &'static str {
+    match e {
+        Error::InvalidParameter { .. } => "ParameterError",
+        Error::ArmFile { .. } => "ArmFileError",
+        Error::UnknownArm { .. } => "UnknownArmError",
+        Error::Unreachable { .. } => "UnreachableError",
+        Error::Singular(_) => "SingularityError",
+        Error::Input { .. } => "InputError",
+        Error::StepTooLarge { .. } => "StepTooLargeError",
+        Error::Diverged { .. } => "DivergenceError",
+        Error::NoConvergence { .. } => "ConvergenceError",
+    }
+}
+
+/// The exception class name and message of a core error.
+pub fn describe(e: &Error) -> (String, String) {
+    (class_name(e).to_string(), e.to_string())
+}
+
+/// Convert a core error to a Python exception of the matching `popup.exceptions` class.
+pub fn to_py(e: Error) -> PyErr {
+    let (cls, msg) = describe(&e);
+    Python::attach(|py| make(py, &cls, &msg))
+}
+
+/// Build an exception of class `cls` from `popup.exceptions` (falls back to a built-in
+/// when that module is not importable).
+pub fn make(py: Python<'_>, cls: &str, msg: &str) -> PyErr {
+    let built = py
+        .import("popup.exceptions")
+        .and_then(|m| m.getattr(cls))
+        .and_then(|c| c.call1((msg.to_string(),)));
+    match built {
+        Ok(obj) => PyErr::from_value(obj),
+        Err(_) if matches!(cls, "DivergenceError" | "ConvergenceError") => PyRuntimeError::new_err(msg.to_string()),
+        Err(_) => PyValueError::new_err(msg.to_string()),
+    }
+}
+
+/// Extension trait: `result.py()?`.
+pub trait IntoPy<T> {
+    /// Map the core error into a Python exception.
+    fn py(self) -> PyResult<T>;
+}
+
+impl<T> IntoPy<T> for Result<T, Error> {
+    fn py(self) -> PyResult<T> {
+        self.map_err(to_py)
+    }
+}

@@ -1,0 +1,322 @@
+//! `Model` (wraps an `Arc<popup_core::model::Model>`) and its batched rollout.
+//!
+//! Array inputs are copied into Rust-owned buffers before the GIL is released, so another
+//! Python thread cannot mutate them during a run.
+
+use crate::arm::PyArm;
+use crate::errors::{describe, make, IntoPy};
+use numpy::ndarray::{Array2, Array3};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use popup_core::drive::{Drive, Linear3, Spline3};
+use popup_core::kinematics::prbm::frames;
+use popup_core::math::{VecN, NV};
+use popup_core::model::{Disable, Integrator, Model, Options};
+use popup_core::params::{ParamData, Params};
+use popup_core::rollout::{rollout, Job};
+use popup_core::sensor::{CHANNELS, NCH, UNITS};
+use popup_core::sim::{check_step, rest_state, RunConfig, State};
+use popup_core::statics;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::Arc;
+
+/// A compiled arm with its simulation options. Immutable and thread-safe; payload and
+/// pressures are per-call parameters.
+#[pyclass(name = "Model", module = "popup._core", frozen)]
+pub struct PyModel {
+    pub m: Arc<Model>,
+}
+
+fn vecn(py: Python<'_>, what: &str, q: &[f64]) -> PyResult<VecN> {
+    if q.len() != NV {
+        return Err(make(py, "InputError", &format!("input {what}: expected {NV} joint values, got {}", q.len())));
+    }
+    Ok(VecN::from_column_slice(q))
+}
+
+impl PyModel {
+    fn pd(&self, payload_kg: f64, pressure_pa: [f64; 2]) -> PyResult<ParamData> {
+        ParamData::new(&self.m, &Params { payload_kg, pressure_pa }).py()
+    }
+}
+
+/// Result of a batched rollout: (data (B, S, NCH), errors, alarms, warnings).
+type RolloutOut<'py> = (
+    Bound<'py, PyArray3<f64>>,
+    Vec<Option<(String, String)>>,
+    Vec<Vec<(usize, f64, f64, f64)>>,
+    Vec<Vec<String>>,
+);
+
+#[pymethods]
+impl PyModel {
+    /// Compile `arm` with the given options. `disable` lists force terms to switch off:
+    /// any of "gravity", "spring", "damper".
+    #[new]
+    #[pyo3(signature = (arm, dt = 1e-3, integrator = "rk4", gravity = None, disable = Vec::new()))]
+    fn new(py: Python<'_>, arm: PyRef<'_, PyArm>, dt: f64, integrator: &str, gravity: Option<[f64; 3]>, disable: Vec<String>) -> PyResult<Self> {
+        let mut d = Disable::default();
+        for s in &disable {
+            match s.as_str() {
+                "gravity" => d.gravity = true,
+                "spring" => d.spring = true,
+                "damper" => d.damper = true,
+                other => return Err(make(py, "ParameterError", &format!("invalid parameter disable = {other:?}: must be one of \"gravity\", \"spring\", \"damper\""))),
+            }
+        }
+        let options = Options { dt, integrator: Integrator::parse(integrator).py()?, gravity, disable: d };
+        Ok(PyModel { m: Arc::new(Model::compile(&arm.spec, options).py()?) })
+    }
+
+    /// The arm this model was compiled from.
+    #[getter]
+    fn arm(&self) -> PyArm {
+        PyArm { spec: self.m.spec.clone() }
+    }
+    /// Physics time step [s].
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.m.options.dt
+    }
+    /// Integrator name.
+    #[getter]
+    fn integrator(&self) -> &'static str {
+        self.m.options.integrator.name()
+    }
+    /// Global order of the integrator.
+    #[getter]
+    fn integrator_order(&self) -> u32 {
+        self.m.options.integrator.order()
+    }
+    /// Disabled force terms.
+    #[getter]
+    fn disabled(&self) -> Vec<&'static str> {
+        let d = self.m.options.disable;
+        let mut v = Vec::new();
+        if d.gravity {
+            v.push("gravity");
+        }
+        if d.spring {
+            v.push("spring");
+        }
+        if d.damper {
+            v.push("damper");
+        }
+        v
+    }
+    /// Gravity in the base frame [m/s²] (zero when disabled).
+    #[getter]
+    fn gravity(&self) -> [f64; 3] {
+        [self.m.gravity.x, self.m.gravity.y, self.m.gravity.z]
+    }
+    /// Joint names in chain order.
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.m.joints.iter().map(|j| j.name.clone()).collect()
+    }
+    /// Chain indices of the motor joints.
+    #[getter]
+    fn motor_index(&self) -> Vec<usize> {
+        self.m.motor_idx.to_vec()
+    }
+    /// Chain indices of the bending joints.
+    #[getter]
+    fn bend_index(&self) -> Vec<usize> {
+        self.m.bend_idx.to_vec()
+    }
+    /// Wrinkling coefficient c in M_w = c · p · r³.
+    #[getter]
+    fn wrinkle_coefficient(&self) -> f64 {
+        self.m.wrinkle_coef
+    }
+    /// Output channel names (columns of rollout data).
+    #[staticmethod]
+    fn channels() -> Vec<&'static str> {
+        CHANNELS.to_vec()
+    }
+    /// Units of the output channels.
+    #[staticmethod]
+    fn units() -> Vec<&'static str> {
+        UNITS.to_vec()
+    }
+
+    /// Derived per-rollout numbers: dict(k, c, mw, warnings).
+    fn param_data<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2]) -> PyResult<Bound<'py, PyDict>> {
+        let pd = self.pd(payload_kg, pressure_pa)?;
+        let d = PyDict::new(py);
+        d.set_item("k", pd.k.to_vec())?;
+        d.set_item("c", pd.c.to_vec())?;
+        d.set_item("mw", pd.mw.to_vec())?;
+        d.set_item("warnings", pd.warnings.clone())?;
+        Ok(d)
+    }
+
+    /// Joint coordinates (7,) at rest: motors at `q_motor`, bending joints in static
+    /// equilibrium.
+    fn rest_state<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q_motor: [f64; 3]) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let pd = self.pd(payload_kg, pressure_pa)?;
+        let st = rest_state(&self.m, &pd, 0.0, q_motor).py()?;
+        Ok(PyArray1::from_slice(py, st.q.as_slice()))
+    }
+
+    /// Locked-motor natural frequencies of the bending joints about q (7,) [rad/s].
+    fn locked_modes<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let pd = self.pd(payload_kg, pressure_pa)?;
+        let q = vecn(py, "q", &q)?;
+        Ok(PyArray1::from_slice(py, &statics::locked_modes(&self.m, &pd, &q)))
+    }
+
+    /// Mass matrix (7, 7) with armature [kg·m²].
+    fn mass_matrix<'py>(&self, py: Python<'py>, payload_kg: f64, q: Vec<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let pd = self.pd(payload_kg, [30e3, 30e3])?;
+        let m = statics::mass_matrix(&self.m, &pd, &vecn(py, "q", &q)?);
+        Ok(Array2::from_shape_fn((NV, NV), |(i, j)| m[(i, j)]).into_pyarray(py))
+    }
+
+    /// Generalised gravity forces G(q) (7,) [N·m].
+    fn gravity_torque<'py>(&self, py: Python<'py>, payload_kg: f64, q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let pd = self.pd(payload_kg, [30e3, 30e3])?;
+        let g = statics::gravity_torque(&self.m, &pd, &vecn(py, "q", &q)?);
+        Ok(PyArray1::from_slice(py, g.as_slice()))
+    }
+
+    /// Homogeneous transforms T_W_i of frames 0..7, shape (8, 4, 4).
+    fn frames<'py>(&self, py: Python<'py>, q: Vec<f64>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let f = frames(&self.m, &vecn(py, "q", &q)?);
+        let mut out = Array3::<f64>::zeros((NV + 1, 4, 4));
+        for i in 0..=NV {
+            for a in 0..3 {
+                for b in 0..3 {
+                    out[[i, a, b]] = f.r_wb[i][(a, b)];
+                }
+                out[[i, a, 3]] = f.p_wb[i][a];
+            }
+            out[[i, 3, 3]] = 1.0;
+        }
+        Ok(out.into_pyarray(py))
+    }
+
+    /// End-effector position p_WE (3,) [m].
+    fn end_effector<'py>(&self, py: Python<'py>, q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let p = popup_core::kinematics::prbm::end_effector(&self.m, &vecn(py, "q", &q)?);
+        Ok(PyArray1::from_slice(py, p.as_slice()))
+    }
+
+    /// Raise `StepTooLargeError` if dt is outside the integrator's stability region for
+    /// the arm linearised about q (free joints: bending only when `replay`).
+    fn check_step(&self, py: Python<'_>, payload_kg: f64, pressure_pa: [f64; 2], q: Vec<f64>, replay: bool) -> PyResult<()> {
+        let pd = self.pd(payload_kg, pressure_pa)?;
+        check_step(&self.m, &pd, &vecn(py, "q", &q)?, replay).py()
+    }
+
+    /// Batched rollout (GIL released, `threads` rayon threads, 0 = all cores).
+    ///
+    /// payload_kg (B,), pressure_pa (B, 2); drive "torque" or "replay"; times (N,) shared
+    /// by all jobs; values (B, N, 3): torques [N·m] or encoder angles [rad];
+    /// initial_q/initial_v (B, 7) or None (rest state); t0 start time for torque runs;
+    /// duration [s] (None for replay = span of `times`); sample_period [s].
+    /// Returns (data (B, S, NCH), errors [None | (class, message)], alarms
+    /// [[(link, t_start, t_end, peak_ratio)]], warnings [[str]]). Failed rows are NaN.
+    #[pyo3(signature = (payload_kg, pressure_pa, drive, times, values, initial_q = None, initial_v = None, duration = None, sample_period = 1e-3, threads = 0, check_step = true))]
+    #[allow(clippy::too_many_arguments)]
+    fn rollout<'py>(
+        &self,
+        py: Python<'py>,
+        payload_kg: PyReadonlyArray1<'py, f64>,
+        pressure_pa: PyReadonlyArray2<'py, f64>,
+        drive: &str,
+        times: PyReadonlyArray1<'py, f64>,
+        values: PyReadonlyArray3<'py, f64>,
+        initial_q: Option<PyReadonlyArray2<'py, f64>>,
+        initial_v: Option<PyReadonlyArray2<'py, f64>>,
+        duration: Option<f64>,
+        sample_period: f64,
+        threads: usize,
+        check_step: bool,
+    ) -> PyResult<RolloutOut<'py>> {
+        let bad = |m: String| make(py, "InputError", &m);
+        let payload = payload_kg.as_array().to_owned();
+        let pressure = pressure_pa.as_array().to_owned();
+        let t = times.as_array().to_vec();
+        let vals = values.as_array().to_owned();
+        let nb = payload.len();
+        if pressure.shape() != [nb, 2] {
+            return Err(bad(format!("input pressure_pa: expected shape ({nb}, 2), got {:?}", pressure.shape())));
+        }
+        if vals.shape()[0] != nb || vals.shape()[2] != 3 || vals.shape()[1] != t.len() {
+            return Err(bad(format!("input values: expected shape ({nb}, {}, 3), got {:?}", t.len(), vals.shape())));
+        }
+        let iq = initial_q.map(|a| a.as_array().to_owned());
+        let iv = initial_v.map(|a| a.as_array().to_owned());
+        for (name, a) in [("initial_q", &iq), ("initial_v", &iv)] {
+            if let Some(a) = a {
+                if a.shape() != [nb, NV] {
+                    return Err(bad(format!("input {name}: expected shape ({nb}, {NV}), got {:?}", a.shape())));
+                }
+            }
+        }
+        if iq.is_none() && iv.is_some() {
+            return Err(bad("input initial_v: given without initial_q".into()));
+        }
+        let is_replay = match drive {
+            "torque" => false,
+            "replay" => true,
+            other => return Err(bad(format!("input drive: {other:?} must be \"torque\" or \"replay\""))),
+        };
+        let mut jobs = Vec::with_capacity(nb);
+        for b in 0..nb {
+            let rows: Vec<[f64; 3]> = (0..t.len()).map(|k| [vals[[b, k, 0]], vals[[b, k, 1]], vals[[b, k, 2]]]).collect();
+            let drv = if is_replay { Drive::Replay(Spline3::new(&t, &rows).py()?) } else { Drive::Torque(Linear3::new(&t, &rows).py()?) };
+            let initial = iq.as_ref().map(|q| State {
+                t: t[0],
+                q: VecN::from_fn(|i, _| q[[b, i]]),
+                v: VecN::from_fn(|i, _| iv.as_ref().map_or(0.0, |v| v[[b, i]])),
+            });
+            jobs.push(Job {
+                params: Params { payload_kg: payload[b], pressure_pa: [pressure[[b, 0]], pressure[[b, 1]]] },
+                run: RunConfig { drive: drv, initial, duration, sample_period, check_step },
+            });
+        }
+        let model = self.m.clone();
+        let results = py.detach(move || rollout(&model, &jobs, threads));
+        let ns = results.iter().find_map(|r| r.as_ref().ok().map(|t| t.nsample));
+        let ns = match ns {
+            Some(n) => n,
+            None => {
+                // every job failed: raise the first error
+                if let Some(Err(e)) = results.first() {
+                    return Err(crate::errors::to_py(e.clone()));
+                }
+                0
+            }
+        };
+        let mut data = Array3::<f64>::from_elem((nb, ns, NCH), f64::NAN);
+        let mut errors = Vec::with_capacity(nb);
+        let mut alarms = Vec::with_capacity(nb);
+        let mut warnings = Vec::with_capacity(nb);
+        for (b, r) in results.into_iter().enumerate() {
+            match r {
+                Ok(tr) => {
+                    if tr.nsample != ns {
+                        return Err(bad(format!("rollout: job {b} produced {} samples, job 0 {ns}; give every job the same duration", tr.nsample)));
+                    }
+                    let a = Array2::from_shape_vec((ns, NCH), tr.data).expect("shape");
+                    data.index_axis_mut(numpy::ndarray::Axis(0), b).assign(&a);
+                    errors.push(None);
+                    alarms.push(tr.alarms.iter().map(|a| (a.link, a.t_start, a.t_end, a.peak_ratio)).collect());
+                    warnings.push(tr.warnings);
+                }
+                Err(e) => {
+                    errors.push(Some(describe(&e)));
+                    alarms.push(Vec::new());
+                    warnings.push(Vec::new());
+                }
+            }
+        }
+        Ok((data.into_pyarray(py), errors, alarms, warnings))
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Model(arm={:?}, dt={}, integrator={:?})", self.m.spec.name, self.m.options.dt, self.m.options.integrator.name())
+    }
+}

@@ -1,0 +1,56 @@
+"""popup: simulation and model-validation toolkit for inflatable robot arms.
+
+The engine is Rust (``popup._core``); this package is the user workflow: arms, models,
+single and batched runs, results with ``.to_pandas()`` and ``.plot()``.
+"""
+
+from __future__ import annotations
+
+from . import _core
+from .exceptions import (
+    ArmFileError,
+    ConvergenceError,
+    DivergenceError,
+    InputError,
+    MeasuredRunError,
+    ParameterError,
+    PopupError,
+    PopupWarning,
+    SingularityError,
+    StepTooLargeError,
+    UnknownArmError,
+    UnreachableError,
+)
+from .model import Arm, Model, RigidArm, load_arm
+from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
+
+__version__: str = _core.__version__
+build_profile: str = _core.BUILD_PROFILE
+build_features: list = list(_core.BUILD_FEATURES)
+
+__all__ = [
+    "Arm",
+    "RigidArm",
+    "Model",
+    "load_arm",
+    "SimResult",
+    "BatchResult",
+    "WrinkleAlarm",
+    "CHANNELS",
+    "UNITS",
+    "PopupError",
+    "ParameterError",
+    "ArmFileError",
+    "UnknownArmError",
+    "UnreachableError",
+    "SingularityError",
+    "InputError",
+    "StepTooLargeError",
+    "DivergenceError",
+    "ConvergenceError",
+    "MeasuredRunError",
+    "PopupWarning",
+    "__version__",
+    "build_profile",
+    "build_features",
+]

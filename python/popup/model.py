@@ -1,0 +1,405 @@
+"""The Python front of the engine: :class:`Model` (arm + options + parameters), single
+runs (torque-driven or encoder replay) and batched rollouts.
+
+Units are SI (m, kg, s, rad, N·m, Pa). Joint order of the chain is
+``q1, q2, d11, d12, q3, d21, d22`` for ``popup-lab`` (see :attr:`Model.joint_names`).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings as _warnings
+from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _core
+from .exceptions import InputError, PopupWarning
+from .results import BatchResult, SimResult, WrinkleAlarm
+
+__all__ = ["Arm", "RigidArm", "Model", "load_arm"]
+
+Arm = _core.Arm
+RigidArm = _core.RigidArm
+
+ArmLike = Union["_core.Arm", str, "os.PathLike[str]"]
+
+
+def load_arm(arm: ArmLike) -> "_core.Arm":
+    """An :class:`Arm` from an Arm, a built-in name (``"popup-lab"``) or a path to a TOML
+    arm file."""
+    if isinstance(arm, _core.Arm):
+        return arm
+    s = os.fspath(arm)
+    if s in _core.Arm.builtin_names():
+        return _core.Arm.builtin(s)
+    if s.endswith(".toml") or os.path.exists(s):
+        return _core.Arm.load(s)
+    return _core.Arm.builtin(s)  # raises UnknownArmError naming the built-ins
+
+
+def _as_float_array(name: str, x: Any, ndim: int) -> np.ndarray:
+    try:
+        a = np.array(x, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"input {name}: cannot convert to a float array ({e})") from None
+    if a.ndim != ndim:
+        raise InputError(f"input {name}: expected {ndim} dimensions, got shape {a.shape}")
+    return a
+
+
+def _tile(name: str, a: np.ndarray, nb: int, inner_ndim: int) -> np.ndarray:
+    """Tile an array without batch axis (ndim == inner_ndim) to (nb, ...)."""
+    if a.ndim == inner_ndim:
+        return np.broadcast_to(a, (nb,) + a.shape).copy()
+    if a.ndim == inner_ndim + 1 and a.shape[0] in (1, nb):
+        return np.broadcast_to(a, (nb,) + a.shape[1:]).copy()
+    raise InputError(f"input {name}: shape {a.shape} does not match the batch size {nb}")
+
+
+class Model:
+    """An arm, simulation options and parameters.
+
+    Parameters
+    ----------
+    arm : Arm, str or path
+        A built-in arm name (``"popup-lab"``), an :class:`Arm`, or a TOML arm file.
+    payload_kg : float, optional
+        Payload at the tip [kg]; default the arm's ``payload.default_kg`` (2 kg).
+    pressure_pa : (float, float), optional
+        Relative inflation pressure of link 1 and 2 [Pa]; default the arm's (30 kPa).
+    gravity : bool
+        Gravity on (the arm's vector, z down) or off.
+    dt : float
+        Physics time step [s]. Default 1e-3 s.
+    integrator : {"rk4", "semi_implicit"}
+        ``"rk4"`` (order 4, default: integration error far below any model error you
+        diagnose) or ``"semi_implicit"`` (order 1, one evaluation per step, MuJoCo
+        ``implicitfast``-like).
+    disable : iterable of {"gravity", "spring", "damper"}
+        Force terms switched off.
+    """
+
+    def __init__(
+        self,
+        arm: ArmLike = "popup-lab",
+        *,
+        payload_kg: Optional[float] = None,
+        pressure_pa: Optional[Sequence[float]] = None,
+        gravity: bool = True,
+        dt: float = 1e-3,
+        integrator: str = "rk4",
+        disable: Iterable[str] = (),
+        _core_model: Optional["_core.Model"] = None,
+    ) -> None:
+        dis = list(disable)
+        if not gravity and "gravity" not in dis:
+            dis.append("gravity")
+        if _core_model is None:
+            _core_model = _core.Model(load_arm(arm), dt=dt, integrator=integrator, disable=dis)
+        self._m = _core_model
+        spec_defaults = self._defaults()
+        self.payload_kg = float(spec_defaults[0] if payload_kg is None else payload_kg)
+        pp = spec_defaults[1] if pressure_pa is None else pressure_pa
+        if np.ndim(pp) == 0:
+            pp = (float(pp), float(pp))  # type: ignore[arg-type]
+        self.pressure_pa: Tuple[float, float] = (float(pp[0]), float(pp[1]))
+        # validate now, so a bad payload/pressure fails at construction
+        info = self._m.param_data(self.payload_kg, self.pressure_pa)
+        for w in info["warnings"]:
+            _warnings.warn(w, PopupWarning, stacklevel=2)
+
+    def _defaults(self) -> Tuple[float, Tuple[float, float]]:
+        import tomllib
+
+        d = tomllib.loads(self._m.arm.to_toml())
+        return float(d["payload"]["default_kg"]), (float(d["links"][0]["pressure_pa"]), float(d["links"][1]["pressure_pa"]))
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def core(self) -> "_core.Model":
+        """The compiled engine model (``popup._core.Model``)."""
+        return self._m
+
+    @property
+    def arm(self) -> "_core.Arm":
+        """The arm description."""
+        return self._m.arm
+
+    @property
+    def dt(self) -> float:
+        """Physics time step [s]."""
+        return float(self._m.dt)
+
+    @property
+    def integrator(self) -> str:
+        """Integrator name."""
+        return str(self._m.integrator)
+
+    @property
+    def joint_names(self) -> List[str]:
+        """Joint names in chain order."""
+        return list(self._m.joint_names)
+
+    @property
+    def wrinkling_moment(self) -> np.ndarray:
+        """Wrinkling-onset moment M_w of link 1 and 2 at the current pressures [N·m]."""
+        return np.array(self._m.param_data(self.payload_kg, self.pressure_pa)["mw"])
+
+    @property
+    def stiffness(self) -> np.ndarray:
+        """Bending stiffness k per chain joint at the current pressures [N·m/rad] (0 on motors)."""
+        return np.array(self._m.param_data(self.payload_kg, self.pressure_pa)["k"])
+
+    @property
+    def damping(self) -> np.ndarray:
+        """Bending damping c per chain joint [N·m·s/rad] (0 on motors)."""
+        return np.array(self._m.param_data(self.payload_kg, self.pressure_pa)["c"])
+
+    def with_params(self, *, payload_kg: Optional[float] = None, pressure_pa: Optional[Sequence[float]] = None) -> "Model":
+        """A copy with other parameters, sharing the compiled engine model."""
+        return Model(
+            payload_kg=self.payload_kg if payload_kg is None else payload_kg,
+            pressure_pa=self.pressure_pa if pressure_pa is None else pressure_pa,
+            _core_model=self._m,
+        )
+
+    def describe(self) -> Dict[str, Any]:
+        """Everything needed to reproduce a run of this model."""
+        return {
+            "arm": self.arm.name,
+            "payload_kg": self.payload_kg,
+            "pressure_pa": self.pressure_pa,
+            "dt": self.dt,
+            "integrator": self.integrator,
+            "disabled": list(self._m.disabled),
+            "gravity_mps2": list(self._m.gravity),
+            "wrinkle_coefficient": float(self._m.wrinkle_coefficient),
+            "popup_version": _core.__version__,
+            "build_profile": _core.BUILD_PROFILE,
+        }
+
+    def __repr__(self) -> str:
+        return (
+            f"Model(arm={self.arm.name!r}, payload_kg={self.payload_kg}, pressure_pa={self.pressure_pa}, "
+            f"dt={self.dt}, integrator={self.integrator!r})"
+        )
+
+    # ------------------------------------------------------------------ statics & kinematics
+    def rest_state(self, q_motor: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+        """Joint coordinates (7,) at rest: motors at ``q_motor`` [rad], bending joints in
+        static equilibrium under gravity and payload."""
+        return np.asarray(self._m.rest_state(self.payload_kg, self.pressure_pa, list(map(float, q_motor))))
+
+    def locked_modes(self, q_motor: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+        """Undamped natural frequencies of the bending joints with the motors locked at
+        ``q_motor``, about the static equilibrium [rad/s], ascending."""
+        q = self.rest_state(q_motor)
+        return np.asarray(self._m.locked_modes(self.payload_kg, self.pressure_pa, q.tolist()))
+
+    def holding_torque(self, q_motor: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+        """Motor torques (3,) that hold the arm at rest at ``q_motor`` [N·m]."""
+        q = self.rest_state(q_motor)
+        g = np.asarray(self._m.gravity_torque(self.payload_kg, q.tolist()))
+        return g[list(self._m.motor_index)]
+
+    def end_effector(self, q: Sequence[float]) -> np.ndarray:
+        """End-effector position p_WE (3,) [m] for chain coordinates q (7,)."""
+        return np.asarray(self._m.end_effector(list(map(float, q))))
+
+    def frames(self, q: Sequence[float]) -> np.ndarray:
+        """Homogeneous transforms T_W_i of frames 0..7, shape (8, 4, 4)."""
+        return np.asarray(self._m.frames(list(map(float, q))))
+
+    def mass_matrix(self, q: Sequence[float]) -> np.ndarray:
+        """Joint-space mass matrix (7, 7) with armature [kg·m²]."""
+        return np.asarray(self._m.mass_matrix(self.payload_kg, list(map(float, q))))
+
+    def rigid(self, table: str = "as_built") -> "_core.RigidArm":
+        """Rigid 3-DOF kinematics: ``"as_built"`` (thesis Table 1) or ``"ik"`` (Table 2)."""
+        return _core.RigidArm(self.arm, table)
+
+    # ------------------------------------------------------------------ runs
+    def simulate(
+        self,
+        torque: Any = None,
+        *,
+        duration: float,
+        torque_times: Any = None,
+        initial_q: Any = None,
+        initial_v: Any = None,
+        sample_rate: float = 500.0,
+        check_step: bool = True,
+    ) -> SimResult:
+        """Torque-driven run: motor torques in, full motion out.
+
+        Parameters
+        ----------
+        torque : None, (3,) or (N, 3) array
+            Motor torques [N·m] (at the reducer, armature included in the model). None =
+            zero; (3,) = constant; (N, 3) = time samples at ``torque_times`` (default: every
+            ``dt`` from 0), interpolated linearly and held after the last sample.
+        duration : float
+            Simulated time [s].
+        initial_q, initial_v : (7,) arrays, optional
+            Initial chain coordinates [rad] and rates [rad/s]; default: at rest with the
+            motors at 0 and the bending joints in static equilibrium.
+        sample_rate : float
+            Output rate [Hz]; 1/sample_rate must be a multiple of ``dt``.
+        """
+        return self.rollout(
+            torque=torque,
+            torque_times=torque_times,
+            duration=duration,
+            initial_q=initial_q,
+            initial_v=initial_v,
+            sample_rate=sample_rate,
+            threads=1,
+            check_step=check_step,
+        )[0]
+
+    def replay(
+        self,
+        t: Any,
+        q: Any,
+        *,
+        initial_q: Any = None,
+        initial_v: Any = None,
+        sample_rate: float = 500.0,
+        check_step: bool = True,
+    ) -> SimResult:
+        """Encoder-driven replay: the motor joints follow ``q`` (N, 3) [rad] at times ``t``
+        (N,) [s] exactly (natural cubic spline: consistent q, q̇, q̈); the bending joints
+        are integrated; the motor torques needed are an output.
+
+        By default the run starts at rest: bending joints in static equilibrium at the
+        first encoder sample.
+        """
+        return self.rollout(
+            encoder_t=t,
+            encoder_q=q,
+            initial_q=initial_q,
+            initial_v=initial_v,
+            sample_rate=sample_rate,
+            threads=1,
+            check_step=check_step,
+        )[0]
+
+    def rollout(
+        self,
+        *,
+        payload_kg: Any = None,
+        pressure_pa: Any = None,
+        torque: Any = None,
+        torque_times: Any = None,
+        duration: Optional[float] = None,
+        encoder_t: Any = None,
+        encoder_q: Any = None,
+        initial_q: Any = None,
+        initial_v: Any = None,
+        sample_rate: float = 500.0,
+        threads: int = 0,
+        check_step: bool = True,
+        raise_on_error: bool = True,
+    ) -> BatchResult:
+        """Batched rollouts in parallel (Rust, GIL released), bit-identical to running the
+        runs one by one and for any ``threads``.
+
+        Every argument may carry a leading batch axis; singletons are tiled. Shapes:
+        payload_kg ``([B])``, pressure_pa ``([B] x 2)``, torque ``(3,)`` (constant),
+        ``(N x 3)`` (time samples) or ``(B x N x 3)`` (N = 1: constant per run), encoder_q ``([B] x N x 3)`` with encoder_t ``(N,)`` shared,
+        initial_q/initial_v ``([B] x 7)``. Give either torques (with ``duration``) or
+        encoder samples. ``threads=0`` uses all cores.
+
+        A failed run raises its error (``raise_on_error``) or leaves NaN rows with the
+        message in ``errors``.
+        """
+        replay = encoder_q is not None or encoder_t is not None
+        if replay and torque is not None:
+            raise InputError("input: give either torque (torque-driven) or encoder_t/encoder_q (replay), not both")
+        pay = np.atleast_1d(_as_float_array("payload_kg", self.payload_kg if payload_kg is None else payload_kg, np.ndim(payload_kg) if payload_kg is not None else 0))
+        pres = _as_float_array("pressure_pa", self.pressure_pa if pressure_pa is None else pressure_pa, np.ndim(pressure_pa) if pressure_pa is not None else 1)
+        if pres.ndim == 1 and pres.shape != (2,):
+            raise InputError(f"input pressure_pa: expected 2 values (link 1, link 2), got shape {pres.shape}")
+        if replay:
+            if encoder_t is None or encoder_q is None:
+                raise InputError("input: replay needs both encoder_t (N,) and encoder_q ([B] x N x 3)")
+            times = _as_float_array("encoder_t", encoder_t, 1)
+            vals = np.asarray(encoder_q, dtype=np.float64)
+            if vals.ndim not in (2, 3) or vals.shape[-1] != 3 or vals.shape[-2] != times.shape[0]:
+                raise InputError(f"input encoder_q: expected shape ([B] x {times.shape[0]} x 3), got {vals.shape}")
+            drive = "replay"
+        else:
+            if duration is None:
+                raise InputError("input duration: a torque-driven run needs a duration [s]")
+            tq = np.zeros(3) if torque is None else np.asarray(torque, dtype=np.float64)
+            if tq.shape[-1:] != (3,):
+                raise InputError(f"input torque: last axis must have 3 motor torques, got shape {tq.shape}")
+            if tq.ndim == 1:
+                tq = tq[None, :]  # constant torque: (1, 3)
+            if tq.ndim == 2:
+                tq = tq[None]
+            n = tq.shape[1]
+            if torque_times is None:
+                times = np.arange(n, dtype=np.float64) * self.dt if n > 1 else np.zeros(1)
+            else:
+                times = _as_float_array("torque_times", torque_times, 1)
+            if n == 1:
+                times = np.array([0.0, max(float(duration), self.dt)])
+                tq = np.repeat(tq, 2, axis=1)
+            vals = tq
+            drive = "torque"
+        nb = max(pay.shape[0], pres.shape[0] if pres.ndim == 2 else 1, vals.shape[0] if vals.ndim == 3 else 1)
+        for name, x in (("initial_q", initial_q), ("initial_v", initial_v)):
+            if x is not None and np.ndim(x) == 2:
+                nb = max(nb, np.shape(x)[0])
+        pay_b = _tile("payload_kg", pay if pay.shape[0] > 1 else pay.reshape(()), nb, 0)
+        pres_b = _tile("pressure_pa", pres, nb, 1)
+        vals_b = _tile("values", vals, nb, 2)
+        iq = None if initial_q is None else _tile("initial_q", _as_float_array("initial_q", initial_q, np.ndim(initial_q)), nb, 1)
+        iv = None if initial_v is None else _tile("initial_v", _as_float_array("initial_v", initial_v, np.ndim(initial_v)), nb, 1)
+        if iv is not None and iq is None:
+            raise InputError("input initial_v: given without initial_q")
+        if not (np.isfinite(sample_rate) and sample_rate > 0):
+            raise InputError(f"input sample_rate: {sample_rate} Hz must be finite and > 0")
+        data, errors, alarms, warns = self._m.rollout(
+            np.ascontiguousarray(pay_b),
+            np.ascontiguousarray(pres_b),
+            drive,
+            np.ascontiguousarray(times),
+            np.ascontiguousarray(vals_b),
+            iq,
+            iv,
+            None if replay else float(duration),  # type: ignore[arg-type]
+            1.0 / float(sample_rate),
+            int(threads),
+            bool(check_step),
+        )
+        err_msgs: List[Optional[str]] = [None if e is None else e[1] for e in errors]
+        if raise_on_error:
+            for e in errors:
+                if e is not None:
+                    _core._raise(e[0], e[1])
+        seen = set()
+        for ws in warns:
+            for w in ws:
+                if w not in seen:
+                    seen.add(w)
+                    _warnings.warn(w, PopupWarning, stacklevel=3)
+        params = self.describe()
+        params.update(
+            {
+                "payload_kg": pay_b,
+                "pressure_pa": pres_b,
+                "drive": drive,
+                "sample_rate_hz": float(sample_rate),
+                "seed": None,
+            }
+        )
+        return BatchResult(
+            data=np.asarray(data),
+            params=params,
+            errors=err_msgs,
+            alarms=[[WrinkleAlarm(*a) for a in al] for al in alarms],
+            warnings=[list(w) for w in warns],
+        )
