@@ -90,9 +90,9 @@ pub fn rest_state(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result
 /// [`Error::StepTooLarge`] naming the mode, its joint and the largest stable step.
 pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Result<()> {
     let free: Vec<usize> = if replay { model.bend_idx.to_vec() } else { (0..NV).collect() };
-    let eigs = linear_eigs(model, pd, q, &free);
     let h = model.options.dt;
     let integ = model.options.integrator;
+    let eigs = linear_eigs(model, pd, q, &free, integ == Integrator::Rk4);
     // per-mode largest stable step
     let stable_at = |lam: nalgebra::Complex<f64>, h: f64| -> bool {
         match integ {

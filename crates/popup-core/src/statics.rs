@@ -110,11 +110,13 @@ pub fn locked_modes(model: &Model, pd: &ParamData, q: &VecN) -> [f64; NB] {
 /// Eigenvalues of the linearised first-order system about `(q, 0)` over the free joints
 /// (`free`: joints that are integrated), with the integrator's view of damping [1/s].
 /// Returns (eigenvalue, index of the joint that dominates its eigenvector).
-pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize]) -> Vec<(Complex<f64>, usize)> {
+/// With `with_damping = false` the dampers are left out (the semi-implicit integrator
+/// treats them implicitly, so only the undamped frequencies limit its step).
+pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with_damping: bool) -> Vec<(Complex<f64>, usize)> {
     let n = free.len();
     let mm = mass_matrix(model, pd, q);
     let kk = stiffness(model, pd, q);
-    let cc = damping_diag(model, pd);
+    let cc = if with_damping { damping_diag(model, pd) } else { VecN::zeros() };
     let m = DMatrix::from_fn(n, n, |i, j| mm[(free[i], free[j])]);
     let k = DMatrix::from_fn(n, n, |i, j| kk[(free[i], free[j])]);
     let c = DMatrix::from_fn(n, n, |i, j| if i == j { cc[free[i]] } else { 0.0 });
