@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# One entry point for a fresh machine: set everything up, then run the demo or the tests.
+#   bash scripts/dev.sh demo   # set up + the main job (examples/demo.py)
+#   bash scripts/dev.sh test   # set up + every test (Rust core, CLI, Python, stubs)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PY=${PYTHON:-python3}
+export PYO3_PYTHON=$("$PY" -c 'import sys; print(sys.executable)')
+export MPLBACKEND=Agg
+
+setup() {
+  command -v cargo >/dev/null || { echo "dev.sh: cargo not found: install the Rust toolchain (rustup) first" >&2; exit 1; }
+  "$PY" -m pip install --quiet --disable-pip-version-check -r requirements-dev.txt
+  # stale extension modules in the source tree would shadow the fresh build
+  rm -f python/popup/_core*.so python/popup/_core*.pyd
+  # editable install: builds popup._core in release (pyproject: [tool.maturin] profile)
+  "$PY" -m pip install --quiet --disable-pip-version-check --no-build-isolation -e .
+}
+
+case "${1:-}" in
+  demo)
+    setup
+    "$PY" examples/demo.py
+    ;;
+  test)
+    setup
+    if cargo nextest --version >/dev/null 2>&1; then
+      cargo nextest run --release --workspace --exclude popup-py --no-fail-fast
+    else
+      cargo test --release --workspace --exclude popup-py
+    fi
+    "$PY" -m pytest -q
+    ;;
+  *)
+    echo "usage: bash scripts/dev.sh demo|test" >&2
+    exit 2
+    ;;
+esac
