@@ -1,17 +1,20 @@
 //! Encoder replay reproduces a torque-driven run.
 //!
 //! A torque-driven run (gravity-holding torques of a pose near hanging, plus sinusoids of
-//! 1–2 N·m) is sampled at every physics step; its motor angles are then replayed (natural
-//! cubic spline through the samples) from the same initial state. Checks:
+//! 1–2 N·m; |τ| up to ~19 N·m) is sampled at every physics step; its motor angles are then
+//! replayed (natural cubic spline through the samples) from the same initial state. Checks:
 //! - the `tau` channel of the torque run is the link-side torque: applied torque minus
 //!   armature · q̈ (q̈ from `forward::accel` at the sampled state) — an identity, 1e-10 N·m;
-//! - the replay's bending angles match the torque run's; the error is the spline's
-//!   acceleration error, O(Δ²) for sample spacing Δ (observed order checked in [1.7, 2.5]);
-//! - the replay's `tau` plus armature · q̈_spline equals the applied torque, with the same
-//!   O(Δ²) error; the tolerance at Δ = 0.25 ms (≈ 3e-4 N·m on ~5 N·m) is
-//!   (M_mm + armature) · Δ²/12 · max|q⁗| with M_mm ≈ 2 kg·m² and |q⁗| up to ~4e3 rad/s⁴ (the
-//!   bending modes at 15–70 rad/s ring in the motor accelerations), i.e. a few 1e-5 N·m, with
-//!   a safety factor of ~10.
+//! - the replay's `tau` plus armature · q̈_spline equals the applied torque. The only error
+//!   source is the spline's acceleration error, O(Δ²) for sample spacing Δ
+//!   (≈ Δ²/12 · q⁗ at the knots), so the observed order must be ≈ 2 ([1.7, 2.5]); at
+//!   Δ = 0.25 ms it is 1.2e-5 N·m, asserted < 1e-4 N·m (5e-6 of the torque range);
+//! - the replay's bending angles match the torque run's. They respond to the same
+//!   acceleration error, filtered by the bending dynamics; observed order ≈ 3.1–3.2 (the
+//!   knot-scale part of the spline error averages out), asserted ≥ 1.7; at Δ = 0.25 ms the
+//!   error is 3.5e-10 rad, asserted < 2e-9 rad.
+//! The torque run goes on 0.1 s past the compared span so that the natural spline end
+//! condition (q̈ = 0 at the last sample) does not enter the comparison.
 
 mod common;
 
@@ -114,10 +117,13 @@ fn replay_of_encoder_angles_reproduces_the_torque_run() {
     for r in &res {
         assert!(r.identity_err < 1e-10, "tau channel is not applied − armature·q̈ ({:e} N·m)", r.identity_err);
     }
-    for p in ob.iter().chain(ot.iter()) {
-        assert!((1.7..=2.5).contains(p), "replay error order {p}, expected 2 (spline acceleration error)");
+    for p in &ot {
+        assert!((1.7..=2.5).contains(p), "replay torque error order {p}, expected 2 (spline acceleration error)");
+    }
+    for p in &ob {
+        assert!((1.7..=4.5).contains(p), "replay bending error order {p}, expected >= 2");
     }
     let last = res.last().unwrap();
-    assert!(last.bend_err < 2e-6, "bending angles differ by {} rad at Δ = 0.25 ms", last.bend_err);
-    assert!(last.tau_err < 3e-4, "motor torques differ by {} N·m at Δ = 0.25 ms", last.tau_err);
+    assert!(last.bend_err < 2e-9, "bending angles differ by {} rad at Δ = 0.25 ms", last.bend_err);
+    assert!(last.tau_err < 1e-4, "motor torques differ by {} N·m at Δ = 0.25 ms", last.tau_err);
 }
