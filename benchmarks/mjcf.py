@@ -19,12 +19,12 @@ popup's kinematics and dynamics against an independent engine:
   combined into one ``<inertial>`` (mass, centre, full inertia about the centre) with the
   parallel-axis theorem.
 * Massless bodies (the gimbals between the two bending joints of a link, bodies 3 and 6)
-  get ``mass = MASSLESS_KG`` (1e-12 kg) and a diagonal inertia ``MASSLESS_INERTIA``
+  get ``mass = MASSLESS_KG`` (1e-14 kg) and a diagonal inertia ``MASSLESS_INERTIA``
   (1e-14 kg·m²) at their origin, because MuJoCo's compiler rejects a moving body whose
   mass or inertia is below mjMINVAL = 1e-15 ("mass and inertia of moving bodies must be
-  larger than mjMINVAL"). Effect: about 4e-13 relative on the mass matrix and on gravity
-  (1e-9 kg gave 4e-10, 1e-14 kg gave 3e-14: the popup/MuJoCo difference is this dummy
-  mass and nothing else), far below every figure the benchmark reports.
+  larger than mjMINVAL"). Effect: about 3e-14 relative on the mass matrix and on gravity.
+  The popup/MuJoCo difference scales with this dummy mass (1e-9 kg gave 4e-10, 1e-12 kg
+  gave 4e-13), i.e. it is this dummy mass and nothing else.
 * Joints. Bending joints get ``stiffness`` (k) and ``damping`` (c) from the arm's Table-3
   values interpolated linearly at the link pressure and scaled by (r/r_ref)³ unless the
   link gives ``stiffness_scale`` (computed here, not taken from popup); springref = 0.
@@ -41,7 +41,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-MASSLESS_KG = 1e-12
+MASSLESS_KG = 1e-14
 MASSLESS_INERTIA = 1e-14
 
 

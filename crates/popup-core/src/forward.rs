@@ -64,8 +64,16 @@ pub fn prescribe(model: &Model, drive: &Drive, t: f64, q: &mut VecN, v: &mut Vec
 #[inline]
 pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64) -> VecN {
     let rot = model.rotations(q);
-    let mut m: MatN = crba(model, &pd.body, &rot);
+    let m = crba(model, &pd.body, &rot);
     let b = rnea(model, &pd.body, &rot, v, &VecN::zeros(), &model.gravity);
+    solve_accel(model, pd, drive, t, q, v, am, h_implicit, &m, &b)
+}
+
+/// [`accel`] given the bare-chain mass matrix `m` and bias `b` at (q, v).
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &MatN, b: &VecN) -> VecN {
+    let mut m: MatN = *m;
     let mut rhs = passive(model, pd, q, v) - b;
     for i in 0..NV {
         m[(i, i)] += model.armature[i];

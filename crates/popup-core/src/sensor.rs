@@ -5,10 +5,11 @@
 //! moment of joint j is `k δ_j + c δ̇_j`; `m*_ratio` is |M| of the link's universal joint
 //! (both axes combined) over the wrinkling-onset moment M_w = coef · p · r³.
 
-use crate::dynamics::forward_pass;
-use crate::forward::motor_torques;
-use crate::kinematics::prbm::frames;
-use crate::math::{Vec3, VecN, NV};
+use crate::drive::Drive;
+use crate::dynamics::{crba, forward_pass, rnea};
+use crate::forward::solve_accel;
+use crate::kinematics::prbm::{frames_with, Frames};
+use crate::math::{MatN, Vec3, VecN, NV};
 use crate::model::Model;
 use crate::params::ParamData;
 
@@ -52,9 +53,16 @@ pub fn bending_moments(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> ([f
 
 /// Total mechanical energy: kinetic (armature included) + gravity + spring [J].
 pub fn energy(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> f64 {
-    let m = crate::statics::mass_matrix(model, pd, q);
-    let kin = 0.5 * v.dot(&(m * v));
-    let f = frames(model, q);
+    let rot = model.rotations(q);
+    let m = crba(model, &pd.body, &rot);
+    energy_with(model, pd, q, v, &m, &frames_with(model, &rot))
+}
+
+fn energy_with(model: &Model, pd: &ParamData, q: &VecN, v: &VecN, m: &MatN, f: &Frames) -> f64 {
+    let mut kin = 0.5 * v.dot(&(m * v));
+    for i in 0..NV {
+        kin += 0.5 * model.armature[i] * v[i] * v[i];
+    }
     let mut pot = 0.0;
     for i in 0..NV {
         let b = &pd.body[i];
@@ -69,18 +77,24 @@ pub fn energy(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> f64 {
     kin + pot
 }
 
-/// Fill one output row at time `t` for state (q, q̇) with accelerations q̈.
-pub fn sample(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, qdd: &VecN, row: &mut [f64]) {
+/// Fill one output row at time `t` for state (q, q̇) (already prescribed in replay, with
+/// the motor accelerations `am`). One mass matrix, one bias and one kinematics pass serve
+/// every channel.
+#[allow(clippy::too_many_arguments)]
+pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, row: &mut [f64]) {
     let rot = model.rotations(q);
-    let bm = forward_pass(model, &rot, v, qdd, &(-model.gravity));
-    let fr = frames(model, q);
-    let tau = motor_torques(model, pd, q, v, qdd);
+    let m = crba(model, &pd.body, &rot);
+    let b = rnea(model, &pd.body, &rot, v, &VecN::zeros(), &model.gravity);
+    let qdd = solve_accel(model, pd, drive, t, q, v, am, 0.0, &m, &b);
+    let bm = forward_pass(model, &rot, v, &qdd, &(-model.gravity));
+    let fr = frames_with(model, &rot);
+    let tau_all = m * qdd + b;
     row[0] = t;
     for k in 0..3 {
         let i = model.motor_idx[k];
         row[1 + k] = q[i];
         row[4 + k] = v[i];
-        row[7 + k] = tau[k];
+        row[7 + k] = tau_all[i];
     }
     let ee = fr.point(model.ee.0 + 1, &model.ee.1);
     row[10..13].copy_from_slice(ee.as_slice());
@@ -100,5 +114,5 @@ pub fn sample(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, qdd: &V
     }
     row[33] = ratio[0];
     row[34] = ratio[1];
-    row[35] = energy(model, pd, q, v);
+    row[35] = energy_with(model, pd, q, v, &m, &fr);
 }

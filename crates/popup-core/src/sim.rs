@@ -3,7 +3,7 @@
 
 use crate::drive::Drive;
 use crate::error::{Error, Result};
-use crate::forward::{accel, prescribe};
+use crate::forward::prescribe;
 use crate::integrate::step;
 use crate::math::{VecN, NV};
 use crate::model::{Integrator, Model};
@@ -226,9 +226,8 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
         let mut q = st.q;
         let mut v = st.v;
         let am = prescribe(model, &cfg.drive, st.t, &mut q, &mut v);
-        let qdd = accel(model, pd, &cfg.drive, st.t, &q, &v, am, 0.0);
         let r = k / every;
-        sample(model, pd, st.t, &q, &v, &qdd, &mut data[r * NCH..(r + 1) * NCH]);
+        sample(model, pd, &cfg.drive, st.t, &q, &v, am, &mut data[r * NCH..(r + 1) * NCH]);
     };
     let mut track = |st: &State, alarms: &mut Vec<Alarm>| {
         let (_, ratio) = bending_moments(model, pd, &st.q, &st.v);

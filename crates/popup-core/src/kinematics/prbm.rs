@@ -22,13 +22,16 @@ impl Frames {
 
 /// Forward kinematics at joint coordinates `q` [rad].
 pub fn frames(model: &Model, q: &VecN) -> Frames {
+    frames_with(model, &model.rotations(q))
+}
+
+/// Forward kinematics from the joint rotations `R_{i-1,i}` (see [`Model::rotations`]).
+pub fn frames_with(model: &Model, rot: &[Mat3; NV]) -> Frames {
     let mut r_wb = [Mat3::identity(); NV + 1];
     let mut p_wb = [Vec3::zeros(); NV + 1];
     for i in 0..NV {
-        let j = &model.joints[i];
-        let r = j.rot(q[i]);
-        r_wb[i + 1] = r_wb[i] * r;
-        p_wb[i + 1] = p_wb[i] + r_wb[i + 1] * j.r;
+        r_wb[i + 1] = r_wb[i] * rot[i];
+        p_wb[i + 1] = p_wb[i] + r_wb[i + 1] * model.joints[i].r;
     }
     Frames { r_wb, p_wb }
 }
