@@ -138,6 +138,20 @@ def test_unreachable_target_is_an_error(model):
     assert len(model.rigid("as_built").ik([-0.8, -0.8, 0.9])) == 4
 
 
+def test_prbm_rigid_table_matches_the_chain_and_its_workspace(model):
+    rigid = model.rigid("prbm")
+    np.testing.assert_allclose(rigid.fk([0.0, 0.0, 0.0]), [1.2, 0.0, 0.0], atol=1e-15)
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        qm = rng.uniform(-2, 2, 3)
+        q = np.zeros(7)
+        q[[0, 1, 4]] = qm
+        np.testing.assert_allclose(rigid.fk(qm), model.end_effector(q), atol=1e-12)
+    # reference-arm.md: the chapter-8 target is inside Table 1's workspace, outside Table 4's
+    with pytest.raises(popup.UnreachableError, match="1.2"):
+        rigid.ik([-0.8, -0.8, 0.9])
+
+
 def test_prbm_frames_consistent_with_end_effector(model):
     q = model.rest_state((0.1, 0.5, -0.4))
     f = model.frames(q)

@@ -216,7 +216,8 @@ class Model:
         return np.asarray(self._m.mass_matrix(self.payload_kg, list(map(float, q))))
 
     def rigid(self, table: str = "as_built") -> "_core.RigidArm":
-        """Rigid 3-DOF kinematics: ``"as_built"`` (thesis Table 1) or ``"ik"`` (Table 2)."""
+        """Rigid 3-DOF kinematics: ``"as_built"`` (thesis Table 1), ``"ik"`` (Table 2) or
+        ``"prbm"`` (the 7-DOF chain with its bending joints at zero, reach 1.2 m)."""
         return _core.RigidArm(self.arm, table)
 
     # ------------------------------------------------------------------ runs

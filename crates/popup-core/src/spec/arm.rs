@@ -377,18 +377,65 @@ impl ArmSpec {
         value.try_into().map_err(|e: toml::de::Error| err(e.to_string()))
     }
 
-    /// The rigid 3-DOF arm of table `which` (`"as_built"`, thesis Table 1, or `"ik"`,
-    /// Table 2).
+    /// The rigid 3-DOF arm of table `which`: `"as_built"` (thesis Table 1), `"ik"`
+    /// (Table 2), or `"prbm"`: the PRBM chain itself with every bending joint at zero,
+    /// reduced to three DH rows (for `popup-lab`: a = (0, 0.6, 0.6) m, reach 1.2 m).
     ///
     /// # Errors
-    /// [`crate::Error::InvalidParameter`] for another name or non-finite numbers.
+    /// [`crate::Error::InvalidParameter`] for another name, non-finite numbers, or a chain
+    /// whose straight pose cannot be written as three DH rows.
     pub fn rigid_arm(&self, which: &str) -> crate::Result<crate::kinematics::rigid::RigidArm> {
         let t = match which {
-            "as_built" => &self.rigid.as_built,
-            "ik" => &self.rigid.ik,
-            _ => return Err(crate::Error::param("rigid table", format!("{which:?}"), "must be \"as_built\" (thesis Table 1) or \"ik\" (Table 2)")),
+            "as_built" => self.rigid.as_built.clone(),
+            "ik" => self.rigid.ik.clone(),
+            "prbm" => self.straight_chain_table()?,
+            _ => {
+                return Err(crate::Error::param(
+                    "rigid table",
+                    format!("{which:?}"),
+                    "must be \"as_built\" (thesis Table 1), \"ik\" (Table 2) or \"prbm\" (the PRBM chain, bending at zero)",
+                ))
+            }
         };
-        crate::kinematics::rigid::RigidArm::new(&format!("{} rigid {which}", self.name), t.d, t.a, t.alpha, t.theta_offset)
+        crate::kinematics::rigid::RigidArm::new(format!("{} rigid {which}", self.name), t.d, t.a, t.alpha, t.theta_offset)
+    }
+
+    /// Three DH rows equivalent to the PRBM chain with the bending joints at zero.
+    fn straight_chain_table(&self) -> crate::Result<RigidTable> {
+        use nalgebra::{Matrix4, Vector3};
+        let bad = |m: String| crate::Error::param("joints", "the PRBM chain", m);
+        let motors: Vec<usize> = self.joints.iter().enumerate().filter(|(_, j)| j.kind == JointKind::Motor).map(|(i, _)| i).collect();
+        if motors.len() != 3 || motors[0] != 0 {
+            return Err(bad("needs 3 motor joints, the first at the base".into()));
+        }
+        let mut out = RigidTable { d: [0.0; 3], a: [0.0; 3], alpha: [0.0; 3], theta_offset: [0.0; 3] };
+        for k in 0..3 {
+            let end = if k < 2 { motors[k + 1] } else { self.joints.len() };
+            let mut t = Matrix4::<f64>::identity();
+            for (n, j) in self.joints[motors[k]..end].iter().enumerate() {
+                let th = if n == 0 { 0.0 } else { j.theta_offset };
+                let (st, ct) = th.sin_cos();
+                let (sa, ca) = j.alpha.sin_cos();
+                #[rustfmt::skip]
+                let a = Matrix4::new(
+                    ct, -st * ca, st * sa, j.a * ct,
+                    st, ct * ca, -ct * sa, j.a * st,
+                    0.0, sa, ca, j.d,
+                    0.0, 0.0, 0.0, 1.0,
+                );
+                t *= a;
+            }
+            let p = Vector3::new(t[(0, 3)], t[(1, 3)], t[(2, 3)]);
+            let x_ok = (t[(0, 0)] - 1.0).abs() < 1e-12 && t[(1, 0)].abs() < 1e-12 && t[(2, 0)].abs() < 1e-12;
+            if !x_ok || p.y.abs() > 1e-12 {
+                return Err(bad(format!("the straight segment after motor {} is not a DH row (Tz(d) Tx(a) Rx(α))", k + 1)));
+            }
+            out.d[k] = p.z;
+            out.a[k] = p.x;
+            out.alpha[k] = t[(2, 1)].atan2(t[(1, 1)]);
+            out.theta_offset[k] = self.joints[motors[k]].theta_offset;
+        }
+        Ok(out)
     }
 }
 
