@@ -27,9 +27,10 @@ pub enum Integrator {
     /// O(dt⁴), no numerical damping of the lightly damped bending modes. Explicit: its
     /// stability region (|R(hλ)| ≤ 1) is checked against the linearised arm before a run.
     Rk4,
-    /// Semi-implicit (symplectic) Euler with the bending dampers implicit — the scheme of
-    /// MuJoCo's `implicitfast`: 1 evaluation per step, global error O(dt), energy bounded
-    /// without drift when damping is off, stable for dt·ω < 2.
+    /// Semi-implicit Euler with the bending dampers implicit — the scheme of MuJoCo's
+    /// `implicitfast`: 1 evaluation per step, global error O(dt), stable for dt·ω < 2 on
+    /// the undamped modes. Energy stays bounded for small oscillations; in large nonlinear
+    /// motion (configuration-dependent M) it drifts at first order.
     SemiImplicit,
 }
 

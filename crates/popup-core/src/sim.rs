@@ -133,7 +133,7 @@ pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Resu
             detail: format!(
                 "the mode at |λ| = {:.1} rad/s (ζ = {:.3}) dominated by joint {} falls outside its stability region",
                 lam.norm(),
-                -lam.re / lam.norm(),
+                (-lam.re / lam.norm()).max(0.0),
                 model.joint_name(joint)
             ),
         });
