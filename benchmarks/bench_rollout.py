@@ -120,6 +120,9 @@ def section_header() -> None:
     print(f"cores    : {ncores()} usable (os.cpu_count() = {os.cpu_count()})")
     print(f"load     : {load_str()}  (timings assume an otherwise idle machine)")
     print(f"platform : {platform.platform()}; Python {platform.python_version()}")
+    so = popup._core.__file__
+    st = os.stat(so)
+    print(f"popup    : {so} ({st.st_size} bytes, built {time.strftime('%Y-%m-%d %H:%M:%S', time.localtime(st.st_mtime))})")
     print(
         f"versions : popup {popup.__version__} (build_profile={popup.build_profile}, features={popup.build_features}); "
         f"mujoco {mujoco.__version__}; numpy {np.__version__}; scipy {scipy.__version__}"
@@ -175,6 +178,9 @@ def section_single(quick: bool) -> Dict[Tuple[str, str, float], float]:
     qm0 = (0.0, -0.6, 0.3)
     tau0 = base.holding_torque(qm0)
     q0 = base.rest_state(qm0)
+    t_w = time.perf_counter()
+    while time.perf_counter() - t_w < 0.5:  # warm-up: caches, CPU clock
+        base.simulate(tau0, duration=1.0, initial_q=q0, sample_rate=1.0)
     for dt in (1e-3, 5e-4):
         n = int(round(sim_t / dt))
         for integ in INTEGRATORS:

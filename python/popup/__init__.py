@@ -7,6 +7,7 @@ single and batched runs, results with ``.to_pandas()`` and ``.plot()``.
 from __future__ import annotations
 
 from . import _core
+from . import io
 from .exceptions import (
     ArmFileError,
     ConvergenceError,
@@ -22,6 +23,7 @@ from .exceptions import (
     UnreachableError,
 )
 from .model import Arm, Model, RigidArm, load_arm
+from .io import MeasuredRun, read_run, write_run
 from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
 
 __version__: str = _core.__version__
@@ -34,6 +36,10 @@ __all__ = [
     "Model",
     "load_arm",
     "SimResult",
+    "MeasuredRun",
+    "read_run",
+    "write_run",
+    "io",
     "BatchResult",
     "WrinkleAlarm",
     "CHANNELS",
