@@ -17,3 +17,12 @@ def test_public_all():
 
     for name in popup.__all__:
         assert hasattr(popup, name), name
+
+
+def test_package_type_checks():
+    pytest.importorskip("mypy")
+    import pathlib
+
+    pkg = pathlib.Path(__file__).resolve().parents[1] / "python" / "popup"
+    r = subprocess.run([sys.executable, "-m", "mypy", str(pkg), "--ignore-missing-imports"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr

@@ -318,10 +318,13 @@ class Model:
         replay = encoder_q is not None or encoder_t is not None
         if replay and torque is not None:
             raise InputError("input: give either torque (torque-driven) or encoder_t/encoder_q (replay), not both")
-        pay = np.atleast_1d(_as_float_array("payload_kg", self.payload_kg if payload_kg is None else payload_kg, np.ndim(payload_kg) if payload_kg is not None else 0))
-        pres = _as_float_array("pressure_pa", self.pressure_pa if pressure_pa is None else pressure_pa, np.ndim(pressure_pa) if pressure_pa is not None else 1)
-        if pres.ndim == 1 and pres.shape != (2,):
-            raise InputError(f"input pressure_pa: expected 2 values (link 1, link 2), got shape {pres.shape}")
+        pay = np.array(self.payload_kg if payload_kg is None else payload_kg, dtype=np.float64)
+        if pay.ndim > 1:
+            raise InputError(f"input payload_kg: expected a scalar or shape (B,), got shape {pay.shape}")
+        pay = pay.reshape(-1)
+        pres = np.array(self.pressure_pa if pressure_pa is None else pressure_pa, dtype=np.float64)
+        if pres.ndim not in (1, 2) or pres.shape[-1] != 2:
+            raise InputError(f"input pressure_pa: expected shape ([B] x 2) (link 1, link 2), got {pres.shape}")
         if replay:
             if encoder_t is None or encoder_q is None:
                 raise InputError("input: replay needs both encoder_t (N,) and encoder_q ([B] x N x 3)")
@@ -354,7 +357,7 @@ class Model:
         for name, x in (("initial_q", initial_q), ("initial_v", initial_v)):
             if x is not None and np.ndim(x) == 2:
                 nb = max(nb, np.shape(x)[0])
-        pay_b = _tile("payload_kg", pay if pay.shape[0] > 1 else pay.reshape(()), nb, 0)
+        pay_b = _tile("payload_kg", pay, nb, 0) if pay.shape[0] > 1 else np.full(nb, pay[0])
         pres_b = _tile("pressure_pa", pres, nb, 1)
         vals_b = _tile("values", vals, nb, 2)
         iq = None if initial_q is None else _tile("initial_q", _as_float_array("initial_q", initial_q, np.ndim(initial_q)), nb, 1)
