@@ -7,7 +7,7 @@ single and batched runs, results with ``.to_pandas()`` and ``.plot()``.
 from __future__ import annotations
 
 from . import _core
-from . import io
+from . import compare, io
 from .exceptions import (
     ArmFileError,
     ConvergenceError,
@@ -23,6 +23,7 @@ from .exceptions import (
     UnreachableError,
 )
 from .model import Arm, Model, RigidArm, load_arm
+from .compare import Comparison
 from .io import MeasuredRun, read_run, write_run
 from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
 
@@ -40,6 +41,8 @@ __all__ = [
     "read_run",
     "write_run",
     "io",
+    "compare",
+    "Comparison",
     "BatchResult",
     "WrinkleAlarm",
     "CHANNELS",
