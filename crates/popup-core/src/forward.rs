@@ -113,12 +113,3 @@ pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
         None => VecN::from_element(f64::NAN),
     }
 }
-
-/// Motor torques at the joint outputs for a motion (q, q̇, q̈): the link-side torque the
-/// reducers deliver, armature excluded [N·m].
-#[inline]
-pub fn motor_torques(model: &Model, pd: &ParamData, q: &VecN, v: &VecN, qdd: &VecN) -> [f64; 3] {
-    let rot = model.rotations(q);
-    let tau = rnea(model, &pd.body, &rot, v, qdd, &model.gravity);
-    std::array::from_fn(|k| tau[model.motor_idx[k]])
-}

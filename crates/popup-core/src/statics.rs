@@ -109,7 +109,8 @@ pub fn locked_modes(model: &Model, pd: &ParamData, q: &VecN) -> [f64; NB] {
 
 /// Eigenvalues of the linearised first-order system about `(q, 0)` over the free joints
 /// (`free`: joints that are integrated), with the integrator's view of damping [1/s].
-/// Returns (eigenvalue, index of the joint that dominates its eigenvector).
+/// Returns (eigenvalue, index of the joint whose diagonal k/m is nearest |λ|², an estimate
+/// of where the mode lives).
 /// With `with_damping = false` the dampers are left out (the semi-implicit integrator
 /// treats them implicitly, so only the undamped frequencies limit its step).
 pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with_damping: bool) -> Vec<(Complex<f64>, usize)> {
@@ -130,8 +131,8 @@ pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with
     let eig = a.clone().complex_eigenvalues();
     let mut out = Vec::with_capacity(2 * n);
     for lam in eig.iter() {
-        // dominant joint: inverse iteration would be exact; the largest diagonal share of
-        // (K + |λ|² M)-weighted participation is enough to name it
+        // name the joint whose own k_ii/m_ii is nearest |λ|²: a cheap estimate of where the
+        // mode lives, good enough for an error message (not an eigenvector)
         let w2 = lam.norm_sqr();
         let mut best = (0usize, f64::NEG_INFINITY);
         for i in 0..n {

@@ -35,6 +35,12 @@ fn vecn(py: Python<'_>, what: &str, q: &[f64]) -> PyResult<VecN> {
 }
 
 impl PyModel {
+    /// ParamData at the arm's default pressures (M and G do not depend on pressure).
+    fn pd_default_pressure(&self, payload_kg: f64) -> PyResult<ParamData> {
+        let l = &self.m.spec.links;
+        self.pd(payload_kg, [l[0].pressure_pa, l[1].pressure_pa])
+    }
+
     fn pd(&self, payload_kg: f64, pressure_pa: [f64; 2]) -> PyResult<ParamData> {
         ParamData::new(&self.m, &Params { payload_kg, pressure_pa }).py()
     }
@@ -168,14 +174,14 @@ impl PyModel {
 
     /// Mass matrix (7, 7) with armature [kg·m²].
     fn mass_matrix<'py>(&self, py: Python<'py>, payload_kg: f64, q: Vec<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let pd = self.pd(payload_kg, [30e3, 30e3])?;
+        let pd = self.pd_default_pressure(payload_kg)?;
         let m = statics::mass_matrix(&self.m, &pd, &vecn(py, "q", &q)?);
         Ok(Array2::from_shape_fn((NV, NV), |(i, j)| m[(i, j)]).into_pyarray(py))
     }
 
     /// Generalised gravity forces G(q) (7,) [N·m].
     fn gravity_torque<'py>(&self, py: Python<'py>, payload_kg: f64, q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let pd = self.pd(payload_kg, [30e3, 30e3])?;
+        let pd = self.pd_default_pressure(payload_kg)?;
         let g = statics::gravity_torque(&self.m, &pd, &vecn(py, "q", &q)?);
         Ok(PyArray1::from_slice(py, g.as_slice()))
     }

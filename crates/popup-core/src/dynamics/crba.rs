@@ -5,7 +5,7 @@
 //! so `M_ii = S_iᵀ Ic_i S_i` and the off-diagonal terms follow by transforming the force
 //! `Ic_i S_i` down the chain.
 
-use crate::math::{Mat3, MatN, Vec3, NV};
+use crate::math::{Mat3, MatN, NV};
 use crate::model::{Model, Rbi};
 
 /// Mass matrix M(q) (nv × nv) [kg·m²] without armature.
@@ -38,11 +38,4 @@ pub fn crba(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV]) -> MatN {
         }
     }
     m
-}
-
-/// Motion subspace of joint `i` as (angular, linear) in body-i axes at origin i.
-#[inline]
-pub fn motion_subspace(model: &Model, i: usize) -> (Vec3, Vec3) {
-    let j = &model.joints[i];
-    (j.u, j.u.cross(&j.r))
 }
