@@ -82,6 +82,11 @@ impl Spline3 {
         Ok(Spline3 { t: t.to_vec(), y: y.to_vec(), m })
     }
 
+    /// Knot times [s] and values.
+    pub fn knots(&self) -> (&[f64], &[[f64; NM]]) {
+        (&self.t, &self.y)
+    }
+
     /// First and last knot times [s].
     pub fn span(&self) -> (f64, f64) {
         (self.t[0], self.t[self.t.len() - 1])

@@ -12,22 +12,64 @@ use crate::math::{MatN, VecN, NV};
 use crate::model::Model;
 use crate::params::ParamData;
 
-/// Passive joint forces `−k δ − c δ̇` on the bending joints [N·m] (respecting `disable`).
+/// Passive joint forces `−k δ − c δ̇` on the bending joints at time `t` [N·m]
+/// (respecting `disable`; with `pressure_leak` k, c follow p(t); with `wrinkling` the
+/// springs are bilinear, see [`crate::effects`]).
 #[inline]
-pub fn passive(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> VecN {
+pub fn passive(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> VecN {
     let d = &model.options.disable;
-    let mut t = VecN::zeros();
-    for &b in &model.bend_idx {
-        let mut f = 0.0;
-        if !d.spring {
-            f -= pd.k[b] * q[b];
+    let fx = &pd.params.effects;
+    let leak = fx.pressure_leak.rate != [0.0; 2];
+    let wrinkle = fx.wrinkling.ratio != 1.0 && !d.spring;
+    let mut t_out = VecN::zeros();
+    if !leak && !wrinkle {
+        for &b in &model.bend_idx {
+            let mut f = 0.0;
+            if !d.spring {
+                f -= pd.k[b] * q[b];
+            }
+            if !d.damper {
+                f -= pd.c[b] * v[b];
+            }
+            t_out[b] = f;
         }
-        if !d.damper {
-            f -= pd.c[b] * v[b];
-        }
-        t[b] = f;
+        return t_out;
     }
-    t
+    let s = spring_moments(model, pd, t, q);
+    for &b in &model.bend_idx {
+        let mut f = -s[b];
+        if !d.damper {
+            f -= pd.kc_at(model, b, t).1 * v[b];
+        }
+        t_out[b] = f;
+    }
+    t_out
+}
+
+/// Spring moments of the bending joints at time `t` (with `pressure_leak` and `wrinkling`)
+/// [N·m]; zero with springs disabled.
+#[inline]
+pub fn spring_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN) -> VecN {
+    let mut s = VecN::zeros();
+    if model.options.disable.spring {
+        return s;
+    }
+    let w = &pd.params.effects.wrinkling;
+    for pair in model.bend_idx.chunks(2) {
+        let (b1, b2) = (pair[0], pair[1]);
+        let (k1, _) = pd.kc_at(model, b1, t);
+        let (k2, _) = pd.kc_at(model, b2, t);
+        if w.ratio != 1.0 && k1 == k2 {
+            let mw = pd.mw_at(model.joints[b1].link, t);
+            let (m1, m2) = crate::effects::wrinkled_spring(k1, q[b1], q[b2], mw, w.ratio);
+            s[b1] = m1;
+            s[b2] = m2;
+        } else {
+            s[b1] = k1 * q[b1];
+            s[b2] = k2 * q[b2];
+        }
+    }
+    s
 }
 
 /// Damping coefficients on the free (bending) joints, for implicit damping.
@@ -74,7 +116,12 @@ pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: 
 #[allow(clippy::too_many_arguments)]
 pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &MatN, b: &VecN) -> VecN {
     let mut m: MatN = *m;
-    let mut rhs = passive(model, pd, q, v) - b;
+    let mut rhs = passive(model, pd, t, q, v) - b;
+    let fx = &pd.params.effects;
+    if fx.air_drag.cd > 0.0 {
+        let rot = model.rotations(q);
+        rhs += crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, &rot, v);
+    }
     for i in 0..NV {
         m[(i, i)] += model.armature[i];
     }
@@ -87,8 +134,13 @@ pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
     match (drive, am) {
         (Drive::Torque(sig), _) => {
             let tau = sig.eval(t);
+            let fr = fx.joint_friction.on();
             for (k, &i) in model.motor_idx.iter().enumerate() {
-                rhs[i] += tau[k];
+                let lim = fx.actuator_saturation.tau_max[k];
+                rhs[i] += if lim.is_finite() { tau[k].clamp(-lim, lim) } else { tau[k] };
+                if fr {
+                    rhs[i] -= crate::effects::friction_torque(&fx.joint_friction, k, v[i]);
+                }
             }
         }
         (Drive::Replay(_), Some(am)) => {

@@ -11,6 +11,7 @@
 
 pub mod drive;
 pub mod dynamics;
+pub mod effects;
 pub mod error;
 pub mod forward;
 pub mod integrate;

@@ -2,8 +2,9 @@
 //! from them for one model (`ParamData`: joint stiffness, damping, wrinkling moments and
 //! body inertias with the payload).
 
+use crate::effects::{drag_points, DragPoint, Effects, MAX_DRAG};
 use crate::error::{Error, Result};
-use crate::math::{Mat3, NV};
+use crate::math::{Mat3, Vec3, NV};
 use crate::model::{Model, Rbi};
 
 /// Parameters of one rollout.
@@ -14,6 +15,8 @@ pub struct Params {
     /// Relative inflation pressure of link 1 and link 2 [Pa], >= 0. k(p), c(p) are
     /// interpolated linearly in the arm's table and clamped (with a warning) outside it.
     pub pressure_pa: [f64; 2],
+    /// Effect parameters (default: the arm file's `[effects]`, usually all neutral).
+    pub effects: Effects,
 }
 
 impl Params {
@@ -22,6 +25,7 @@ impl Params {
         Params {
             payload_kg: model.spec.payload.default_kg,
             pressure_pa: [model.spec.links[0].pressure_pa, model.spec.links[1].pressure_pa],
+            effects: model.spec.effects,
         }
     }
 }
@@ -39,6 +43,10 @@ pub struct ParamData {
     pub mw: [f64; 2],
     /// Body inertias about their frame origins, payload included.
     pub body: [Rbi; NV],
+    /// Table values k(p₀), c(p₀) per link before the link scale (for `pressure_leak`).
+    pub kc0: [[f64; 2]; 2],
+    /// Air-drag quadrature points and their count (filled only with `air_drag` on).
+    pub drag: ([DragPoint; MAX_DRAG], usize),
     /// Warnings raised while deriving (pressure outside the table, ...).
     pub warnings: Vec<String>,
 }
@@ -66,11 +74,23 @@ impl ParamData {
         if !(params.payload_kg.is_finite() && params.payload_kg >= 0.0) {
             return Err(Error::param("payload_kg", params.payload_kg, "must be finite and >= 0 kg"));
         }
+        let fx = &params.effects;
+        fx.validate()?;
+        fx.check_structure(model)?;
+        let payload = params.payload_kg + fx.payload_mass.delta_kg;
+        if payload < 0.0 {
+            return Err(Error::param(
+                "effects.payload_mass.delta_kg",
+                fx.payload_mass.delta_kg,
+                format!("gives a negative payload ({payload} kg with {} kg declared)", params.payload_kg),
+            ));
+        }
         let mut warnings = Vec::new();
         let t = &model.spec.stiffness;
         let mut kl = [0.0; 2];
         let mut cl = [0.0; 2];
         let mut mw = [0.0; 2];
+        let mut kc0 = [[0.0; 2]; 2];
         for l in 0..2 {
             let p = params.pressure_pa[l];
             if !(p.is_finite() && p >= 0.0) {
@@ -86,9 +106,13 @@ impl ParamData {
                     t.pressure_pa[t.pressure_pa.len() - 1]
                 ));
             }
+            kc0[l] = [k, c];
             kl[l] = k * model.link_scale[l];
             cl[l] = c * model.link_scale[l];
             mw[l] = model.wrinkle_coef * p * model.link_radius[l].powi(3);
+            if fx.wrinkling.mw_scale != 1.0 {
+                mw[l] *= fx.wrinkling.mw_scale;
+            }
         }
         let mut k = [0.0; NV];
         let mut c = [0.0; NV];
@@ -98,7 +122,48 @@ impl ParamData {
         }
         let mut body = model.body;
         let pb = model.payload_body;
-        body[pb] = body[pb].add(&Rbi::from_com(params.payload_kg, model.payload_com, Mat3::zeros()));
-        Ok(ParamData { params: *params, k, c, mw, body, warnings })
+        let com = if fx.payload_mass.com_offset_m == [0.0; 3] { model.payload_com } else { model.payload_com + Vec3::from(fx.payload_mass.com_offset_m) };
+        let payload = if fx.payload_mass.delta_kg == 0.0 { params.payload_kg } else { payload };
+        body[pb] = body[pb].add(&Rbi::from_com(payload, com, Mat3::zeros()));
+        let drag = if fx.air_drag.cd > 0.0 { drag_points(model) } else { ([DragPoint { body: 0, p_b: Vec3::zeros(), area: 0.0 }; MAX_DRAG], 0) };
+        Ok(ParamData { params: *params, k, c, mw, body, kc0, drag, warnings })
+    }
+
+    /// Spring and damper coefficients of chain joint `b` at time `t` (with `pressure_leak`,
+    /// k and c follow the table at p(t)) [N·m/rad], [N·m·s/rad].
+    #[inline]
+    pub fn kc_at(&self, model: &Model, b: usize, t: f64) -> (f64, f64) {
+        let l = model.joints[b].link;
+        let rate = self.params.effects.pressure_leak.rate[l];
+        if rate == 0.0 {
+            return (self.k[b], self.c[b]);
+        }
+        let tab = &model.spec.stiffness;
+        let p = self.params.pressure_pa[l] * (-rate * t).exp();
+        let (k, _) = interp_clamped(&tab.pressure_pa, &tab.k_nm_per_rad, p);
+        let (c, _) = interp_clamped(&tab.pressure_pa, &tab.c_nms_per_rad, p);
+        (self.k[b] * (k / self.kc0[l][0]), if self.kc0[l][1] > 0.0 { self.c[b] * (c / self.kc0[l][1]) } else { self.c[b] })
+    }
+
+    /// Pressure of link `l` at time `t` [Pa].
+    #[inline]
+    pub fn pressure_at(&self, l: usize, t: f64) -> f64 {
+        let rate = self.params.effects.pressure_leak.rate[l];
+        if rate == 0.0 {
+            self.params.pressure_pa[l]
+        } else {
+            self.params.pressure_pa[l] * (-rate * t).exp()
+        }
+    }
+
+    /// Wrinkling-onset moment of link `l` at time `t` [N·m].
+    #[inline]
+    pub fn mw_at(&self, l: usize, t: f64) -> f64 {
+        let rate = self.params.effects.pressure_leak.rate[l];
+        if rate == 0.0 {
+            self.mw[l]
+        } else {
+            self.mw[l] * (-rate * t).exp()
+        }
     }
 }

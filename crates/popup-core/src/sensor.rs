@@ -7,7 +7,7 @@
 
 use crate::drive::Drive;
 use crate::dynamics::{crba, forward_pass, rnea};
-use crate::forward::solve_accel;
+use crate::forward::{solve_accel, spring_moments};
 use crate::kinematics::prbm::{frames_with, Frames};
 use crate::math::{MatN, Vec3, VecN, NV};
 use crate::model::Model;
@@ -35,30 +35,49 @@ pub fn channel_index(name: &str) -> Option<usize> {
     CHANNELS.iter().position(|c| *c == name)
 }
 
-/// Bending moments `k δ + c δ̇` of the four bending joints [N·m] and |M|/M_w per link.
+/// Bending moments `k δ + c δ̇` of the four bending joints at time `t` [N·m] and |M|/M_w
+/// per link (with the effects' spring law and M_w(t)).
 #[inline]
-pub fn bending_moments(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> ([f64; 4], [f64; 2]) {
+pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> ([f64; 4], [f64; 2]) {
     let d = &model.options.disable;
+    let fx = &pd.params.effects;
     let mut m = [0.0; 4];
     let mut sq = [0.0; 2];
+    if fx.pressure_leak.rate == [0.0; 2] && (fx.wrinkling.ratio == 1.0 || d.spring) {
+        for (a, &b) in model.bend_idx.iter().enumerate() {
+            let ks = if d.spring { 0.0 } else { pd.k[b] };
+            let cs = if d.damper { 0.0 } else { pd.c[b] };
+            m[a] = ks * q[b] + cs * v[b];
+            sq[model.joints[b].link] += m[a] * m[a];
+        }
+        let ratio = std::array::from_fn(|l| if pd.mw[l] > 0.0 { sq[l].sqrt() / pd.mw[l] } else { f64::INFINITY });
+        return (m, ratio);
+    }
+    let s = spring_moments(model, pd, t, q);
     for (a, &b) in model.bend_idx.iter().enumerate() {
-        let ks = if d.spring { 0.0 } else { pd.k[b] };
-        let cs = if d.damper { 0.0 } else { pd.c[b] };
-        m[a] = ks * q[b] + cs * v[b];
+        let cs = if d.damper { 0.0 } else { pd.kc_at(model, b, t).1 };
+        m[a] = s[b] + cs * v[b];
         sq[model.joints[b].link] += m[a] * m[a];
     }
-    let ratio = std::array::from_fn(|l| if pd.mw[l] > 0.0 { sq[l].sqrt() / pd.mw[l] } else { f64::INFINITY });
+    let ratio = std::array::from_fn(|l| {
+        let mw = pd.mw_at(l, t);
+        if mw > 0.0 {
+            sq[l].sqrt() / mw
+        } else {
+            f64::INFINITY
+        }
+    });
     (m, ratio)
 }
 
 /// Total mechanical energy: kinetic (armature included) + gravity + spring [J].
-pub fn energy(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> f64 {
+pub fn energy(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> f64 {
     let rot = model.rotations(q);
     let m = crba(model, &pd.body, &rot);
-    energy_with(model, pd, q, v, &m, &frames_with(model, &rot))
+    energy_with(model, pd, t, q, v, &m, &frames_with(model, &rot))
 }
 
-fn energy_with(model: &Model, pd: &ParamData, q: &VecN, v: &VecN, m: &MatN, f: &Frames) -> f64 {
+fn energy_with(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, m: &MatN, f: &Frames) -> f64 {
     let mut kin = 0.5 * v.dot(&(m * v));
     for i in 0..NV {
         kin += 0.5 * model.armature[i] * v[i] * v[i];
@@ -69,9 +88,21 @@ fn energy_with(model: &Model, pd: &ParamData, q: &VecN, v: &VecN, m: &MatN, f: &
         let mc_w = f.p_wb[i + 1] * b.m + f.r_wb[i + 1] * b.h;
         pot -= model.gravity.dot(&mc_w);
     }
-    if !model.options.disable.spring {
+    let fx = &pd.params.effects;
+    if model.options.disable.spring {
+    } else if fx.pressure_leak.rate == [0.0; 2] && fx.wrinkling.ratio == 1.0 {
         for &b in &model.bend_idx {
             pot += 0.5 * pd.k[b] * q[b] * q[b];
+        }
+    } else {
+        for pair in model.bend_idx.chunks(2) {
+            let (b1, b2) = (pair[0], pair[1]);
+            let (k1, k2) = (pd.kc_at(model, b1, t).0, pd.kc_at(model, b2, t).0);
+            if fx.wrinkling.ratio != 1.0 && k1 == k2 {
+                pot += crate::effects::wrinkled_energy(k1, q[b1], q[b2], pd.mw_at(model.joints[b1].link, t), fx.wrinkling.ratio);
+            } else {
+                pot += 0.5 * (k1 * q[b1] * q[b1] + k2 * q[b2] * q[b2]);
+            }
         }
     }
     kin + pot
@@ -88,13 +119,22 @@ pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v:
     let qdd = solve_accel(model, pd, drive, t, q, v, am, 0.0, &m, &b);
     let bm = forward_pass(model, &rot, v, &qdd, &(-model.gravity));
     let fr = frames_with(model, &rot);
-    let tau_all = m * qdd + b;
+    let mut tau_all = m * qdd + b;
+    let fx = &pd.params.effects;
+    if fx.air_drag.cd > 0.0 {
+        tau_all -= crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, &rot, v);
+    }
     row[0] = t;
     for k in 0..3 {
         let i = model.motor_idx[k];
         row[1 + k] = q[i];
         row[4 + k] = v[i];
-        row[7 + k] = tau_all[i];
+        let mut tau = tau_all[i];
+        if fx.joint_friction.on() {
+            tau += crate::effects::friction_torque(&fx.joint_friction, k, v[i]);
+        }
+        let lim = fx.actuator_saturation.tau_max[k];
+        row[7 + k] = if lim.is_finite() { tau.clamp(-lim, lim) } else { tau };
     }
     let ee = fr.point(model.ee.0 + 1, &model.ee.1);
     row[10..13].copy_from_slice(ee.as_slice());
@@ -104,9 +144,9 @@ pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v:
         let f: Vec3 = a + wd.cross(p) + w.cross(&w.cross(p));
         row[13 + 3 * s..16 + 3 * s].copy_from_slice(f.as_slice());
     }
-    row[19] = pd.params.pressure_pa[0];
-    row[20] = pd.params.pressure_pa[1];
-    let (mom, ratio) = bending_moments(model, pd, q, v);
+    row[19] = pd.pressure_at(0, t);
+    row[20] = pd.pressure_at(1, t);
+    let (mom, ratio) = bending_moments(model, pd, t, q, v);
     for (a, &b) in model.bend_idx.iter().enumerate() {
         row[21 + a] = q[b];
         row[25 + a] = v[b];
@@ -114,5 +154,5 @@ pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v:
     }
     row[33] = ratio[0];
     row[34] = ratio[1];
-    row[35] = energy_with(model, pd, q, v, &m, &fr);
+    row[35] = energy_with(model, pd, t, q, v, &m, &fr);
 }

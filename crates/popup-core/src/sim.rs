@@ -1,7 +1,8 @@
 //! Running the arm: initial state, pre-run step-size check, the fixed-step loop with
 //! divergence detection, sampling of the sensor channels and the wrinkling alarm log.
 
-use crate::drive::Drive;
+use crate::drive::{Drive, Spline3};
+use crate::effects::{delay_columns, play};
 use crate::error::{Error, Result};
 use crate::forward::prescribe;
 use crate::integrate::step;
@@ -196,6 +197,9 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
         ));
     }
     let nstep = (duration / dt + 1e-9).floor() as usize;
+    let fx = &pd.params.effects;
+    let (drive, encoder) = effect_drive(model, pd, &cfg.drive)?;
+    let cfg = &RunConfig { drive, ..cfg.clone() };
     let mut st = match cfg.initial {
         Some(s) => {
             for i in 0..NV {
@@ -227,10 +231,16 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
         let mut v = st.v;
         let am = prescribe(model, &cfg.drive, st.t, &mut q, &mut v);
         let r = k / every;
-        sample(model, pd, &cfg.drive, st.t, &q, &v, am, &mut data[r * NCH..(r + 1) * NCH]);
+        let row = &mut data[r * NCH..(r + 1) * NCH];
+        sample(model, pd, &cfg.drive, st.t, &q, &v, am, row);
+        if let Some(enc) = &encoder {
+            let (qe, ve, _) = enc.eval(st.t);
+            row[1..4].copy_from_slice(&qe);
+            row[4..7].copy_from_slice(&ve);
+        }
     };
     let mut track = |st: &State, alarms: &mut Vec<Alarm>| {
-        let (_, ratio) = bending_moments(model, pd, &st.q, &st.v);
+        let (_, ratio) = bending_moments(model, pd, st.t, &st.q, &st.v);
         for l in 0..2 {
             match open[l] {
                 None if ratio[l] > 1.0 => {
@@ -260,5 +270,38 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
             write(k + 1, &st, &mut data);
         }
     }
+    let ts = every as f64 * dt;
+    let sd = &fx.sensor_delay;
+    delay_columns(&mut data, NCH, 13..19, ts, sd.imu);
+    delay_columns(&mut data, NCH, 7..10, ts, sd.torque);
+    delay_columns(&mut data, NCH, 10..13, ts, sd.mocap);
+    if !cfg.drive.is_replay() {
+        delay_columns(&mut data, NCH, 1..7, ts, sd.encoder);
+    }
     Ok(Trajectory { data, nsample, alarms, final_state: st, warnings: pd.warnings.clone() })
+}
+
+/// The drive the physics sees under `backlash` and an encoder `sensor_delay` in replay:
+/// the link side follows the play operator of the true motor angle, and the true motor
+/// angle leads the encoder by the delay (`q_m(t) = q_enc(t + delay)`). Returns the drive
+/// and, when it differs from the encoder spline, the encoder spline for the q/dq channels.
+fn effect_drive(model: &Model, pd: &ParamData, drive: &Drive) -> Result<(Drive, Option<Spline3>)> {
+    let fx = &pd.params.effects;
+    let gap = fx.backlash.gap;
+    let delay = fx.sensor_delay.encoder;
+    match drive {
+        Drive::Torque(_) if gap != [0.0; 3] => Err(Error::param(
+            "effects.backlash.gap",
+            format!("{gap:?}"),
+            "backlash needs encoder replay in this version (torque drive has no motor-side state until the motoreducer model of the controller issue)",
+        )),
+        Drive::Replay(s) if gap != [0.0; 3] || delay != 0.0 => {
+            let _ = model;
+            let (t, y) = s.knots();
+            let ts: Vec<f64> = if delay != 0.0 { t.iter().map(|&x| x - delay).collect() } else { t.to_vec() };
+            let yl = if gap != [0.0; 3] { play(y, &gap) } else { y.to_vec() };
+            Ok((Drive::Replay(Spline3::new(&ts, &yl)?), Some(s.clone())))
+        }
+        _ => Ok((drive.clone(), None)),
+    }
 }

@@ -63,11 +63,34 @@ pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<Vec
     for it in 0..50 {
         let g = gravity_torque(model, pd, &x);
         let mut r = SVector::<f64, NB>::zeros();
+        let fx = &pd.params.effects;
+        let sm = if fx.wrinkling.ratio != 1.0 || fx.pressure_leak.rate != [0.0; 2] { Some(crate::forward::spring_moments(model, pd, 0.0, &x)) } else { None };
         for (a, &b) in bi.iter().enumerate() {
-            let spring = if model.options.disable.spring { 0.0 } else { pd.k[b] * x[b] };
+            let spring = if model.options.disable.spring {
+                0.0
+            } else if let Some(s) = &sm {
+                s[b]
+            } else {
+                pd.k[b] * x[b]
+            };
             r[a] = g[b] + spring;
         }
-        let kk = sub(&stiffness(model, pd, &x), &bi);
+        let mut kfull = stiffness(model, pd, &x);
+        if sm.is_some() {
+            // tangent of the effect-modified springs (bilinear, leaking) instead of diag(k)
+            let h = 1e-7;
+            for &j in &bi {
+                kfull[(j, j)] -= pd.k[j];
+                let (mut xp, mut xm) = (x, x);
+                xp[j] += h;
+                xm[j] -= h;
+                let d = (crate::forward::spring_moments(model, pd, 0.0, &xp) - crate::forward::spring_moments(model, pd, 0.0, &xm)) / (2.0 * h);
+                for &i in &bi {
+                    kfull[(i, j)] += d[i];
+                }
+            }
+        }
+        let kk = sub(&kfull, &bi);
         let dx = kk.lu().solve(&r).ok_or_else(|| Error::NoConvergence {
             what: "static equilibrium".into(),
             message: "the bending stiffness matrix is singular (springs disabled or zero?)".into(),
@@ -75,7 +98,7 @@ pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<Vec
         for (a, &b) in bi.iter().enumerate() {
             x[b] -= dx[a];
         }
-        if dx.amax() < 1e-14 && it > 0 {
+        if dx.amax() < if sm.is_some() { 1e-12 } else { 1e-14 } && it > 0 {
             return Ok(x);
         }
         if !dx.amax().is_finite() || dx.amax() > 10.0 {

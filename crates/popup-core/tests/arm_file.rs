@@ -68,7 +68,7 @@ mass_kg = 3.0           # elbow motoreducer 1.5 → 3 kg
 
     let lab = Model::compile(&ArmSpec::popup_lab(), Options::default()).unwrap();
     let new = Model::compile(&spec, Options::default()).unwrap();
-    let p = Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3] };
+    let p = Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3], effects: Default::default() };
     let (pd0, pd1) = (ParamData::new(&lab, &p).unwrap(), ParamData::new(&new, &p).unwrap());
     let b12 = lab.bend_idx[1];
     let b22 = lab.bend_idx[3];

@@ -20,7 +20,7 @@ fn lab(dt: f64, integ: Integrator) -> Model {
 }
 
 fn defaults() -> Params {
-    Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3] }
+    Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3], effects: Default::default() }
 }
 
 fn expect_param(r: popup_core::Result<impl std::fmt::Debug>, what: &str, facts: &[&str]) -> String {

@@ -27,7 +27,7 @@ fn jobs() -> Vec<Job> {
     let mut rng = Rng(2024);
     (0..16)
         .map(|n| {
-            let params = Params { payload_kg: rng.uniform(0.0, 4.0), pressure_pa: [rng.uniform(8e3, 95e3), rng.uniform(8e3, 95e3)] };
+            let params = Params { payload_kg: rng.uniform(0.0, 4.0), pressure_pa: [rng.uniform(8e3, 95e3), rng.uniform(8e3, 95e3)], effects: Default::default() };
             let drive = if n % 3 == 2 {
                 let t: Vec<f64> = (0..=40).map(|k| k as f64 * 0.0125).collect();
                 let (a, w) = (rng.uniform(0.1, 0.5), rng.uniform(2.0, 8.0));

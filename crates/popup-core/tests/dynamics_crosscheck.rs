@@ -39,7 +39,7 @@ fn cases() -> Vec<Case> {
             // every third case with the arm file's gravity, the others with a random one
             let g = if n % 3 == 0 { [0.0, 0.0, -9.81] } else { [rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0)] };
             let model = Model::compile(&spec, Options { gravity: Some(g), ..Options::default() }).unwrap();
-            let params = Params { payload_kg: rng.uniform(0.0, 5.0), pressure_pa: [rng.uniform(5e3, 95e3), rng.uniform(5e3, 95e3)] };
+            let params = Params { payload_kg: rng.uniform(0.0, 5.0), pressure_pa: [rng.uniform(5e3, 95e3), rng.uniform(5e3, 95e3)], effects: Default::default() };
             let pd = ParamData::new(&model, &params).unwrap();
             let mut q = VecN::zeros();
             let mut v = VecN::zeros();
@@ -135,7 +135,7 @@ fn aba_matches_crba_rnea_forward_dynamics() {
         let tm = [rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0)];
         let drive = Drive::Torque(Linear3::new(&[0.0], &[tm]).unwrap());
         let a = accel(&c.model, &c.pd, &drive, 0.3, &c.q, &c.v, None, 0.0);
-        let mut tau_full = passive(&c.model, &c.pd, &c.q, &c.v);
+        let mut tau_full = passive(&c.model, &c.pd, 0.0, &c.q, &c.v);
         for k in 0..3 {
             tau_full[c.model.motor_idx[k]] += tm[k];
         }
@@ -247,13 +247,13 @@ fn gravity_torque_is_gradient_of_potential() {
         let opts = Options { gravity: Some(c.g.into()), disable: Disable { spring: true, ..Disable::default() }, ..Options::default() };
         let m2 = Model::compile(&ArmSpec::popup_lab(), opts).unwrap();
         let pd2 = ParamData::new(&m2, &c.pd.params).unwrap();
-        let e = popup_core::sensor::energy(&m2, &pd2, &c.q, &VecN::zeros());
+        let e = popup_core::sensor::energy(&m2, &pd2, 0.0, &c.q, &VecN::zeros());
         let v0 = potential(c, &c.q);
         let de = (e - v0).abs() / v0.abs().max(1.0);
         worst_energy = worst_energy.max(de);
         assert!(de < 1e-12, "case {n}: sensor::energy {e} vs V {v0}");
         // and the spring term is ½ Σ k δ² when springs are on
-        let es = popup_core::sensor::energy(&c.model, &c.pd, &c.q, &VecN::zeros());
+        let es = popup_core::sensor::energy(&c.model, &c.pd, 0.0, &c.q, &VecN::zeros());
         let spring: f64 = c.model.bend_idx.iter().map(|&b| 0.5 * c.pd.k[b] * c.q[b] * c.q[b]).sum();
         assert!((es - v0 - spring).abs() < 1e-9 * (es.abs() + 1.0), "case {n}: energy with springs {es} vs {}", v0 + spring);
     }

@@ -40,7 +40,7 @@ fn model(dt: f64, integ: Integrator, damper: bool) -> Model {
 }
 
 fn params() -> Params {
-    Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3] }
+    Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3], effects: Default::default() }
 }
 
 fn initial(small: bool) -> State {

@@ -3,6 +3,7 @@
 //! `Model`, `PyRigidArm` → `RigidArm`).
 
 mod arm;
+mod cli;
 mod errors;
 mod model;
 
@@ -20,6 +21,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<arm::PyRigidArm>()?;
     m.add_class::<model::PyModel>()?;
     m.add_function(wrap_pyfunction!(_raise, m)?)?;
+    m.add_function(wrap_pyfunction!(cli::run_cli, m)?)?;
     m.add("__version__", popup_core::VERSION)?;
     m.add("BUILD_PROFILE", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("BUILD_FEATURES", popup_core::BUILD_FEATURES.to_vec())?;

@@ -219,6 +219,13 @@ pub struct ArmSpec {
     pub rigid: RigidSpec,
     /// Gravity in the base frame [m/s²].
     pub gravity_mps2: [f64; 3],
+    /// Effects switched on in this arm (`[effects.<name>]` tables; absent = nominal).
+    #[serde(default, skip_serializing_if = "is_nominal")]
+    pub effects: crate::effects::Effects,
+}
+
+fn is_nominal(e: &crate::effects::Effects) -> bool {
+    *e == crate::effects::Effects::default()
 }
 
 fn joint(name: &str, kind: JointKind, a: f64, alpha: f64, link: usize) -> JointSpec {
@@ -313,6 +320,7 @@ impl ArmSpec {
                 ik: RigidTable { d: [0.0; 3], a: [0.0, 0.745, 0.685], alpha: [FRAC_PI_2, 0.0, 0.0], theta_offset: [0.0; 3] },
             },
             gravity_mps2: [0.0, 0.0, -9.81],
+            effects: Default::default(),
         }
     }
 

@@ -1,0 +1,602 @@
+//! The effect library: optional physical terms that the nominal model leaves out
+//! (`effects.md`). Each effect has named parameters with units, bounds and a neutral value;
+//! at its neutral value an effect is skipped entirely, so the model is bit-identical to
+//! the nominal one.
+//!
+//! Effects are per-rollout numbers ([`crate::params::Params::effects`]), so a fit can vary
+//! them across a batch. Two effects change the joint structure (`higher_bending_modes`,
+//! `torsion`); the structure is taken from the arm file's `[effects]` table when the model
+//! is compiled, and the rollout may then vary their continuous parameters.
+//!
+//! Physical definitions (SI units; `docs/effects.md` has the derivations):
+//! - `joint_friction`: motor-side torque `τ_f = (τ_c + τ_s e^{−(q̇/v_s)²}) tanh(q̇/v_ε) + b q̇`
+//!   with `v_ε` = [`FRICTION_V_EPS`]; it opposes the motor in torque drive and adds to the
+//!   torque the motor must deliver in replay (the `tau*` channels).
+//! - `backlash`: play operator of full width `gap` between encoder (motor side) and link
+//!   side: `q_l ← clamp(q_l, q_m − gap/2, q_m + gap/2)` at every encoder sample (replay).
+//! - `pressure_leak`: `p(t) = p₀ e^{−rate·t}` per link (t on the run's clock); k(p), c(p)
+//!   follow the table and `M_w = coef·p·r³` follows p.
+//! - `wrinkling`: bilinear spring per universal joint: with `s = k|δ|` (both axes) and
+//!   `M'_w = mw_scale·M_w`, the spring moment is `kδ` for `s ≤ M'_w` and
+//!   `(M'_w + ratio·(s − M'_w)) δ/|δ|` above.
+//! - `payload_mass`: payload `m + delta_kg` at `com + com_offset_m`.
+//! - `sensor_delay`: a sensor group reads the physics `delay` seconds late:
+//!   `y(t) = y_true(t − delay)` (cubic interpolation between samples, first sample held).
+//! - `actuator_saturation`: motor torque clamped to ±`tau_max` (the command in torque
+//!   drive; the measured torque in replay).
+//! - `air_drag`: quadratic drag `dF = −½ ρ c_d (2r) |v⊥| v⊥ dl` along every link tube
+//!   (3-point Gauss per tube piece, ρ = [`AIR_DENSITY`]).
+//! - `higher_bending_modes`, `torsion`: extra joints (see `docs/effects.md`).
+
+use crate::error::{Error, Result};
+use crate::math::{Vec3, VecN, NV};
+use crate::model::Model;
+use serde::{Deserialize, Serialize};
+
+/// Air density used by `air_drag` [kg/m³] (sea level, 20 °C).
+pub const AIR_DENSITY: f64 = 1.204;
+/// Velocity scale of the smoothed sign in `joint_friction` [rad/s].
+pub const FRICTION_V_EPS: f64 = 1e-3;
+
+/// Coulomb + viscous (+ Stribeck) friction in each motoreducer.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct JointFriction {
+    /// Coulomb torque per motor joint [N·m].
+    pub tau_c: [f64; 3],
+    /// Viscous coefficient per motor joint [N·m·s/rad].
+    pub b: [f64; 3],
+    /// Stribeck excess static torque [N·m].
+    pub tau_s: [f64; 3],
+    /// Stribeck velocity [rad/s].
+    pub v_s: [f64; 3],
+}
+impl JointFriction {
+    /// True when any friction torque is non-zero.
+    #[inline]
+    pub fn on(&self) -> bool {
+        self.tau_c != [0.0; 3] || self.b != [0.0; 3] || self.tau_s != [0.0; 3]
+    }
+}
+impl Default for JointFriction {
+    fn default() -> Self {
+        JointFriction { tau_c: [0.0; 3], b: [0.0; 3], tau_s: [0.0; 3], v_s: [0.05; 3] }
+    }
+}
+
+/// Dead zone between encoder and link side of each motor joint.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Backlash {
+    /// Full width of the dead zone per motor joint [rad].
+    pub gap: [f64; 3],
+}
+
+/// Multi-segment PRBM links.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HigherBendingModes {
+    /// Number of PRBM segments per link (1, 2 or 3; structural).
+    pub segments: [f64; 2],
+    /// Scale of the segment springs per link (1 = same static tip deflection as one joint).
+    pub k_scale: [f64; 2],
+}
+impl Default for HigherBendingModes {
+    fn default() -> Self {
+        HigherBendingModes { segments: [1.0; 2], k_scale: [1.0; 2] }
+    }
+}
+
+/// Inflation pressure decaying during the run.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PressureLeak {
+    /// Leak rate 1/τ per link [1/s]: p(t) = p₀ exp(−rate·t).
+    pub rate: [f64; 2],
+}
+
+/// Stiffness loss past the wrinkling moment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Wrinkling {
+    /// Stiffness after wrinkling over stiffness before [1].
+    pub ratio: f64,
+    /// Scale of the wrinkling moment M_w [1].
+    pub mw_scale: f64,
+}
+impl Default for Wrinkling {
+    fn default() -> Self {
+        Wrinkling { ratio: 1.0, mw_scale: 1.0 }
+    }
+}
+
+/// The true payload differs from the declared one.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PayloadMass {
+    /// Mass error [kg] (true = declared + delta).
+    pub delta_kg: f64,
+    /// Centre offset in the payload body's frame [m].
+    pub com_offset_m: [f64; 3],
+}
+
+/// Sensor groups reading the physics late.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorDelay {
+    /// IMU channels delay [s].
+    pub imu: f64,
+    /// Encoder channels (q, dq) delay [s].
+    pub encoder: f64,
+    /// Motor-torque channels delay [s].
+    pub torque: f64,
+    /// Motion-capture (end-effector) channels delay [s].
+    pub mocap: f64,
+}
+
+/// Motor torque limits.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ActuatorSaturation {
+    /// Torque limit per motor joint [N·m] (∞ = none).
+    pub tau_max: [f64; 3],
+}
+impl Default for ActuatorSaturation {
+    fn default() -> Self {
+        ActuatorSaturation { tau_max: [f64::INFINITY; 3] }
+    }
+}
+
+/// Quadratic aerodynamic drag on the links.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AirDrag {
+    /// Drag coefficient on the projected area 2·r·l [1].
+    pub cd: f64,
+}
+
+/// Torsional compliance of each link about its own axis.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Torsion {
+    /// Torsional stiffness per link [N·m/rad] (∞ = rigid, no torsion joint).
+    pub k_t: [f64; 2],
+    /// Torsional damping per link [N·m·s/rad].
+    pub c_t: [f64; 2],
+}
+impl Default for Torsion {
+    fn default() -> Self {
+        Torsion { k_t: [f64::INFINITY; 2], c_t: [0.0; 2] }
+    }
+}
+
+/// Parameters of every effect; [`Effects::default`] is the nominal model (all neutral).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Effects {
+    /// `joint_friction`.
+    pub joint_friction: JointFriction,
+    /// `backlash`.
+    pub backlash: Backlash,
+    /// `higher_bending_modes`.
+    pub higher_bending_modes: HigherBendingModes,
+    /// `pressure_leak`.
+    pub pressure_leak: PressureLeak,
+    /// `wrinkling`.
+    pub wrinkling: Wrinkling,
+    /// `payload_mass`.
+    pub payload_mass: PayloadMass,
+    /// `sensor_delay`.
+    pub sensor_delay: SensorDelay,
+    /// `actuator_saturation`.
+    pub actuator_saturation: ActuatorSaturation,
+    /// `air_drag`.
+    pub air_drag: AirDrag,
+    /// `torsion`.
+    pub torsion: Torsion,
+}
+
+/// One parameter of the registry.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamSpec {
+    /// Effect name (`effects.md`).
+    pub effect: &'static str,
+    /// Parameter name.
+    pub name: &'static str,
+    /// Unit.
+    pub unit: &'static str,
+    /// Number of values (per joint: 3, per link: 2, scalar: 1).
+    pub len: usize,
+    /// Neutral value.
+    pub neutral: f64,
+    /// Lower bound (inclusive).
+    pub lo: f64,
+    /// Upper bound (inclusive).
+    pub hi: f64,
+    /// Fitted by default when the effect is diagnosed.
+    pub fit: bool,
+    /// Integer-valued (structural).
+    pub integer: bool,
+    /// What it is.
+    pub doc: &'static str,
+}
+
+const fn p(effect: &'static str, name: &'static str, unit: &'static str, len: usize, neutral: f64, lo: f64, hi: f64, fit: bool, doc: &'static str) -> ParamSpec {
+    ParamSpec { effect, name, unit, len, neutral, lo, hi, fit, integer: false, doc }
+}
+
+/// Effect names in library order.
+pub const EFFECT_NAMES: [&str; 10] = [
+    "joint_friction",
+    "backlash",
+    "higher_bending_modes",
+    "pressure_leak",
+    "wrinkling",
+    "payload_mass",
+    "sensor_delay",
+    "actuator_saturation",
+    "air_drag",
+    "torsion",
+];
+
+const INF: f64 = f64::INFINITY;
+
+/// The parameter registry, in flat-vector order (see [`Effects::to_flat`]).
+pub const PARAMS: [ParamSpec; NPARAM] = [
+    p("joint_friction", "tau_c", "N·m", 3, 0.0, 0.0, 100.0, true, "Coulomb friction torque per motor joint"),
+    p("joint_friction", "b", "N·m·s/rad", 3, 0.0, 0.0, 100.0, true, "viscous friction per motor joint"),
+    p("joint_friction", "tau_s", "N·m", 3, 0.0, 0.0, 100.0, false, "Stribeck excess static torque per motor joint"),
+    p("joint_friction", "v_s", "rad/s", 3, 0.05, 1e-4, 10.0, false, "Stribeck velocity per motor joint"),
+    p("backlash", "gap", "rad", 3, 0.0, 0.0, 0.2, true, "full width of the dead zone per motor joint"),
+    ParamSpec {
+        effect: "higher_bending_modes",
+        name: "segments",
+        unit: "1",
+        len: 2,
+        neutral: 1.0,
+        lo: 1.0,
+        hi: 3.0,
+        fit: false,
+        integer: true,
+        doc: "PRBM segments per link (structural)",
+    },
+    p("higher_bending_modes", "k_scale", "1", 2, 1.0, 0.05, 20.0, true, "scale of the segment springs per link"),
+    p("pressure_leak", "rate", "1/s", 2, 0.0, 0.0, 1.0, true, "leak rate 1/τ per link: p(t) = p0·exp(−rate·t)"),
+    p("wrinkling", "ratio", "1", 1, 1.0, 0.01, 1.0, true, "bending stiffness after wrinkling / before"),
+    p("wrinkling", "mw_scale", "1", 1, 1.0, 0.1, 10.0, true, "scale of the wrinkling moment M_w"),
+    p("payload_mass", "delta_kg", "kg", 1, 0.0, -50.0, 50.0, true, "true payload minus declared payload"),
+    p("payload_mass", "com_offset_m", "m", 3, 0.0, -1.0, 1.0, false, "payload centre offset in the payload body frame"),
+    p("sensor_delay", "imu", "s", 1, 0.0, 0.0, 0.5, true, "IMU delay"),
+    p("sensor_delay", "encoder", "s", 1, 0.0, 0.0, 0.5, true, "encoder delay"),
+    p("sensor_delay", "torque", "s", 1, 0.0, 0.0, 0.5, true, "motor-torque delay"),
+    p("sensor_delay", "mocap", "s", 1, 0.0, 0.0, 0.5, true, "motion-capture (end-effector) delay"),
+    p("actuator_saturation", "tau_max", "N·m", 3, INF, 0.0, INF, true, "torque limit per motor joint"),
+    p("air_drag", "cd", "1", 1, 0.0, 0.0, 100.0, true, "drag coefficient on the projected area 2·r·l"),
+    p("torsion", "k_t", "N·m/rad", 2, INF, 1e-3, INF, true, "torsional stiffness per link (∞ = rigid)"),
+    p("torsion", "c_t", "N·m·s/rad", 2, 0.0, 0.0, 1e4, true, "torsional damping per link"),
+];
+
+/// Number of registered parameters.
+pub const NPARAM: usize = 20;
+
+/// Length of the flat effect vector.
+pub const NE: usize = {
+    let mut n = 0;
+    let mut i = 0;
+    while i < NPARAM {
+        n += PARAMS[i].len;
+        i += 1;
+    }
+    n
+};
+
+/// Offset of parameter `i` in the flat vector.
+pub const fn offset(i: usize) -> usize {
+    let mut n = 0;
+    let mut k = 0;
+    while k < i {
+        n += PARAMS[k].len;
+        k += 1;
+    }
+    n
+}
+
+impl Effects {
+    fn slots(&self) -> [&[f64]; NPARAM] {
+        let e = self;
+        [
+            &e.joint_friction.tau_c,
+            &e.joint_friction.b,
+            &e.joint_friction.tau_s,
+            &e.joint_friction.v_s,
+            &e.backlash.gap,
+            &e.higher_bending_modes.segments,
+            &e.higher_bending_modes.k_scale,
+            &e.pressure_leak.rate,
+            std::slice::from_ref(&e.wrinkling.ratio),
+            std::slice::from_ref(&e.wrinkling.mw_scale),
+            std::slice::from_ref(&e.payload_mass.delta_kg),
+            &e.payload_mass.com_offset_m,
+            std::slice::from_ref(&e.sensor_delay.imu),
+            std::slice::from_ref(&e.sensor_delay.encoder),
+            std::slice::from_ref(&e.sensor_delay.torque),
+            std::slice::from_ref(&e.sensor_delay.mocap),
+            &e.actuator_saturation.tau_max,
+            std::slice::from_ref(&e.air_drag.cd),
+            &e.torsion.k_t,
+            &e.torsion.c_t,
+        ]
+    }
+
+    fn slots_mut(&mut self) -> [&mut [f64]; NPARAM] {
+        let e = self;
+        [
+            &mut e.joint_friction.tau_c,
+            &mut e.joint_friction.b,
+            &mut e.joint_friction.tau_s,
+            &mut e.joint_friction.v_s,
+            &mut e.backlash.gap,
+            &mut e.higher_bending_modes.segments,
+            &mut e.higher_bending_modes.k_scale,
+            &mut e.pressure_leak.rate,
+            std::slice::from_mut(&mut e.wrinkling.ratio),
+            std::slice::from_mut(&mut e.wrinkling.mw_scale),
+            std::slice::from_mut(&mut e.payload_mass.delta_kg),
+            &mut e.payload_mass.com_offset_m,
+            std::slice::from_mut(&mut e.sensor_delay.imu),
+            std::slice::from_mut(&mut e.sensor_delay.encoder),
+            std::slice::from_mut(&mut e.sensor_delay.torque),
+            std::slice::from_mut(&mut e.sensor_delay.mocap),
+            &mut e.actuator_saturation.tau_max,
+            std::slice::from_mut(&mut e.air_drag.cd),
+            &mut e.torsion.k_t,
+            &mut e.torsion.c_t,
+        ]
+    }
+
+    /// The flat parameter vector (registry order, [`NE`] values).
+    pub fn to_flat(&self) -> [f64; NE] {
+        let mut out = [0.0; NE];
+        let mut k = 0;
+        for s in self.slots() {
+            out[k..k + s.len()].copy_from_slice(s);
+            k += s.len();
+        }
+        out
+    }
+
+    /// Build from a flat vector and validate it.
+    ///
+    /// # Errors
+    /// As [`Effects::validate`], or a wrong length.
+    pub fn from_flat(v: &[f64]) -> Result<Effects> {
+        if v.len() != NE {
+            return Err(Error::param("effects", v.len(), format!("the flat effect vector has {NE} values")));
+        }
+        let mut e = Effects::default();
+        let mut k = 0;
+        for s in e.slots_mut() {
+            let n = s.len();
+            s.copy_from_slice(&v[k..k + n]);
+            k += n;
+        }
+        e.validate()?;
+        Ok(e)
+    }
+
+    /// Check every value against its bounds.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming `effects.<effect>.<param>[i]`.
+    pub fn validate(&self) -> Result<()> {
+        for (i, s) in self.slots().iter().enumerate() {
+            let ps = &PARAMS[i];
+            for (j, &x) in s.iter().enumerate() {
+                let key = if ps.len > 1 { format!("effects.{}.{}[{j}]", ps.effect, ps.name) } else { format!("effects.{}.{}", ps.effect, ps.name) };
+                if x.is_nan() || x < ps.lo || x > ps.hi {
+                    return Err(Error::param(key, x, format!("must be within [{}, {}] {}", ps.lo, ps.hi, ps.unit)));
+                }
+                if ps.integer && x.fract() != 0.0 {
+                    return Err(Error::param(key, x, "must be a whole number"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// True when the named effect is at its neutral value (changes nothing).
+    pub fn is_neutral(&self, effect: &str) -> bool {
+        let slots = self.slots();
+        PARAMS[..NPARAM].iter().zip(slots.iter()).filter(|(ps, _)| ps.effect == effect).all(|(ps, s)| {
+            // parameters that only shape an effect whose strength is neutral do not count
+            let shaping = matches!((ps.effect, ps.name), ("joint_friction", "v_s") | ("torsion", "c_t") | ("higher_bending_modes", "k_scale"));
+            shaping || s.iter().all(|&x| x.to_bits() == ps.neutral.to_bits())
+        })
+    }
+
+    /// Names of the effects that are not neutral.
+    pub fn active(&self) -> Vec<&'static str> {
+        EFFECT_NAMES.iter().copied().filter(|n| !self.is_neutral(n)).collect()
+    }
+
+    /// Structural parameters must match the compiled model.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] when a rollout asks for another joint structure than
+    /// the model was compiled with.
+    pub fn check_structure(&self, model: &Model) -> Result<()> {
+        let base = &model.spec.effects;
+        for l in 0..2 {
+            if self.higher_bending_modes.segments[l] != base.higher_bending_modes.segments[l] {
+                return Err(Error::param(
+                    format!("effects.higher_bending_modes.segments[{l}]"),
+                    self.higher_bending_modes.segments[l],
+                    format!(
+                        "is structural: the model was compiled with {} segment(s); compile another model (Model.with_effect) to change it",
+                        base.higher_bending_modes.segments[l]
+                    ),
+                ));
+            }
+            if self.torsion.k_t[l].is_finite() != base.torsion.k_t[l].is_finite() {
+                return Err(Error::param(
+                    format!("effects.torsion.k_t[{l}]"),
+                    self.torsion.k_t[l],
+                    "switches the torsion joint on or off, which is structural: compile another model (Model.with_effect)",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Motor-side friction torque at motor rate `v` [N·m] (joint `k` of 3).
+#[inline]
+pub fn friction_torque(f: &JointFriction, k: usize, v: f64) -> f64 {
+    let mut s = f.tau_c[k];
+    if f.tau_s[k] != 0.0 {
+        let r = v / f.v_s[k];
+        s += f.tau_s[k] * (-r * r).exp();
+    }
+    s * (v / FRICTION_V_EPS).tanh() + f.b[k] * v
+}
+
+/// Leak factor p(t)/p₀ for link `l`.
+#[inline]
+pub fn leak_factor(e: &Effects, l: usize, t: f64) -> f64 {
+    (-e.pressure_leak.rate[l] * t).exp()
+}
+
+/// A point of the drag quadrature: body (0-based), position in body axes [m], link axis
+/// in body axes, and weight `2 r Δl` [m²].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DragPoint {
+    /// Body index (0-based).
+    pub body: usize,
+    /// Position in the body frame [m].
+    pub p_b: Vec3,
+    /// Projected area of the tube piece it stands for [m²].
+    pub area: f64,
+}
+
+/// Maximum number of drag points.
+pub const MAX_DRAG: usize = 3 * 2 * NV;
+
+/// Drag quadrature points of the link tubes: 3-point Gauss–Legendre along each tube piece
+/// (tubes lie along their body's local x axis).
+pub fn drag_points(model: &Model) -> ([DragPoint; MAX_DRAG], usize) {
+    let mut out = [DragPoint { body: 0, p_b: Vec3::zeros(), area: 0.0 }; MAX_DRAG];
+    let mut n = 0;
+    let xi = [-(0.6f64).sqrt(), 0.0, (0.6f64).sqrt()];
+    let w = [5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0];
+    for (i, bs) in model.spec.bodies.iter().enumerate() {
+        if bs.link == 0 {
+            continue;
+        }
+        for ps in &bs.parts {
+            if ps.shape != crate::spec::arm::PartShape::Tube || ps.length_m <= 0.0 {
+                continue;
+            }
+            let r = ps.radius_m.unwrap_or(model.link_radius[bs.link - 1]);
+            let c = Vec3::from(ps.com_m);
+            for g in 0..3 {
+                if n < MAX_DRAG {
+                    out[n] = DragPoint { body: i, p_b: c + Vec3::x() * (0.5 * ps.length_m * xi[g]), area: 2.0 * r * ps.length_m * w[g] };
+                    n += 1;
+                }
+            }
+        }
+    }
+    (out, n)
+}
+
+/// Generalised air-drag forces [N·m] at (q, q̇) for drag coefficient `cd`.
+pub fn drag_forces(model: &Model, pts: &[DragPoint], cd: f64, rot: &[crate::math::Mat3; NV], v: &VecN) -> VecN {
+    let f = crate::kinematics::prbm::frames_with(model, rot);
+    let mut axis = [Vec3::zeros(); NV];
+    for j in 0..NV {
+        axis[j] = f.r_wb[j + 1] * model.joints[j].u;
+    }
+    let mut tau = VecN::zeros();
+    for d in pts {
+        let p = f.point(d.body + 1, &d.p_b);
+        let mut vel = Vec3::zeros();
+        for j in 0..=d.body {
+            vel += axis[j].cross(&(p - f.p_wb[j])) * v[j];
+        }
+        let e = f.r_wb[d.body + 1] * Vec3::x();
+        let vp = vel - e * vel.dot(&e);
+        let force = vp * (-0.5 * AIR_DENSITY * cd * d.area * vp.norm());
+        for j in 0..=d.body {
+            tau[j] += axis[j].cross(&(p - f.p_wb[j])).dot(&force);
+        }
+    }
+    tau
+}
+
+/// Bilinear wrinkled spring: the spring moments of one universal joint for deflections
+/// (δ₁, δ₂) with stiffness `k`, onset moment `mw` and post-wrinkling ratio `ratio` [N·m].
+#[inline]
+pub fn wrinkled_spring(k: f64, d1: f64, d2: f64, mw: f64, ratio: f64) -> (f64, f64) {
+    let (m1, m2) = (k * d1, k * d2);
+    let s = (m1 * m1 + m2 * m2).sqrt();
+    if s <= mw {
+        return (m1, m2);
+    }
+    let g = (mw + ratio * (s - mw)) / s;
+    (m1 * g, m2 * g)
+}
+
+/// Potential energy of the wrinkled spring [J].
+#[inline]
+pub fn wrinkled_energy(k: f64, d1: f64, d2: f64, mw: f64, ratio: f64) -> f64 {
+    let d = (d1 * d1 + d2 * d2).sqrt();
+    let dw = mw / k;
+    if d <= dw {
+        0.5 * k * d * d
+    } else {
+        0.5 * k * dw * dw + mw * (d - dw) + 0.5 * ratio * k * (d - dw) * (d - dw)
+    }
+}
+
+/// Play operator over encoder samples: link-side angles for full gaps `gap` [rad].
+pub fn play(y: &[[f64; 3]], gap: &[f64; 3]) -> Vec<[f64; 3]> {
+    let mut out = Vec::with_capacity(y.len());
+    let mut ql = y.first().copied().unwrap_or([0.0; 3]);
+    for row in y {
+        for c in 0..3 {
+            let h = 0.5 * gap[c];
+            ql[c] = ql[c].clamp(row[c] - h, row[c] + h);
+        }
+        out.push(ql);
+    }
+    out
+}
+
+/// Delay columns `cols` of a row-major sample array (`nch` columns, uniform period `ts`)
+/// by `delay` seconds: `y(t_k) ← y(t_k − delay)` with Catmull–Rom interpolation, holding
+/// the first sample before the start.
+pub fn delay_columns(data: &mut [f64], nch: usize, cols: std::ops::Range<usize>, ts: f64, delay: f64) {
+    let n = data.len() / nch;
+    if n == 0 || delay == 0.0 {
+        return;
+    }
+    let s = delay / ts;
+    let mut col = vec![0.0; n];
+    for c in cols {
+        for k in 0..n {
+            col[k] = data[k * nch + c];
+        }
+        let at = |i: isize| col[i.clamp(0, n as isize - 1) as usize];
+        for k in 0..n {
+            let x = k as f64 - s;
+            if x <= 0.0 {
+                data[k * nch + c] = col[0];
+                continue;
+            }
+            let i = x.floor() as isize;
+            let u = x - i as f64;
+            let (p0, p1, p2, p3) = (at(i - 1), at(i), at(i + 1), at(i + 2));
+            data[k * nch + c] = p1 + 0.5 * u * (p2 - p0 + u * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + u * (3.0 * (p1 - p2) + p3 - p0)));
+        }
+    }
+}
