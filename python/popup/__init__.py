@@ -1,13 +1,15 @@
 """popup: simulation and model-validation toolkit for inflatable robot arms.
 
 The engine is Rust (``popup._core``); this package is the user workflow: arms, models,
-single and batched runs, results with ``.to_pandas()`` and ``.plot()``.
+single and batched runs, results with ``.to_pandas()`` and ``.plot()``; measured runs,
+comparison, diagnosis against the effect library (:mod:`popup.effects`), the
+add-effect-and-refit loop and reports.
 """
 
 from __future__ import annotations
 
 from . import _core
-from . import compare, io
+from . import compare, effects, io
 from .exceptions import (
     ArmFileError,
     ConvergenceError,
@@ -26,6 +28,8 @@ from .model import Arm, Model, RigidArm, load_arm
 from .compare import Comparison
 from .io import MeasuredRun, read_run, write_run
 from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
+from .diagnosis import Diagnosis, History, Suspect, diagnose, improve
+from . import report, synth
 
 __version__: str = _core.__version__
 build_profile: str = _core.BUILD_PROFILE
@@ -43,6 +47,14 @@ __all__ = [
     "io",
     "compare",
     "Comparison",
+    "effects",
+    "diagnose",
+    "improve",
+    "Diagnosis",
+    "History",
+    "Suspect",
+    "report",
+    "synth",
     "BatchResult",
     "WrinkleAlarm",
     "CHANNELS",

@@ -6,7 +6,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, final
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Arm", "RigidArm", "Model", "_raise", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
+__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "EFFECT_NAMES", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
 
 __version__: str
 BUILD_PROFILE: str
@@ -15,6 +15,10 @@ BUILD_FEATURES: List[str]
 _F = npt.NDArray[np.float64]
 
 def _raise(cls: str, msg: str) -> None: ...
+def run_cli(argv: Sequence[str]) -> int: ...
+def effect_registry() -> List[Tuple[str, str, str, int, float, float, float, bool, bool, str]]: ...
+
+EFFECT_NAMES: List[str]
 
 @final
 class Arm:
@@ -101,4 +105,5 @@ class Model:
         sample_period: float = 1e-3,
         threads: int = 0,
         check_step: bool = True,
+        effects: Optional[_F] = None,
     ) -> Tuple[_F, List[Optional[Tuple[str, str]]], List[List[Tuple[int, float, float, float]]], List[List[str]]]: ...

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import warnings as _warnings
-from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -55,6 +55,12 @@ def _tile(name: str, a: np.ndarray, nb: int, inner_ndim: int) -> np.ndarray:
     if a.ndim == inner_ndim + 1 and a.shape[0] in (1, nb):
         return np.broadcast_to(a, (nb,) + a.shape[1:]).copy()
     raise InputError(f"input {name}: shape {a.shape} does not match the batch size {nb}")
+
+
+def _effects_dict(row: np.ndarray) -> Dict[str, Dict[str, List[float]]]:
+    from . import effects as fx
+
+    return fx.from_flat(row)
 
 
 class Model:
@@ -155,6 +161,58 @@ class Model:
     def damping(self) -> np.ndarray:
         """Bending damping c per chain joint [N·m·s/rad] (0 on motors)."""
         return np.array(self._m.param_data(self.payload_kg, self.pressure_pa)["c"])
+
+    # ------------------------------------------------------------------ effects
+    @property
+    def effects_flat(self) -> np.ndarray:
+        """The arm's effect parameters as a flat vector (registry order, see
+        :mod:`popup.effects`)."""
+        import tomllib
+
+        from . import effects as fx
+
+        d = tomllib.loads(self._m.arm.to_toml()).get("effects", {})
+        return fx.to_flat(d)
+
+    @property
+    def effects(self) -> Dict[str, Dict[str, List[float]]]:
+        """Effects switched on in this model: ``{effect: {param: values}}``."""
+        from . import effects as fx
+
+        return fx.from_flat(self.effects_flat)
+
+    def with_effects(self, effects: Mapping[str, Mapping[str, Any]]) -> "Model":
+        """A copy with several effects set (``{effect: {param: values}}``; parameters not
+        named keep their values). Structural parameters recompile the engine model."""
+        from . import effects as fx
+
+        over: Dict[str, Dict[str, List[float]]] = {}
+        for name, params in effects.items():
+            over[name] = {k: [float(x) for x in v] for k, v in fx.normalize(name, params).items()}
+            for k, v in over[name].items():
+                if len(v) == 1:
+                    over[name][k] = v[0]  # type: ignore[assignment]
+        arm = self._m.arm.with_overrides({"effects": over})
+        return self._recompiled(arm)
+
+    def with_effect(self, name: str, **params: Any) -> "Model":
+        """A copy with effect ``name`` switched on with ``params`` (see
+        ``popup.effects.EFFECTS[name].params`` for names, units and bounds), e.g.
+        ``model.with_effect("joint_friction", tau_c=[1.4, 2.1, 0.9])``."""
+        return self.with_effects({name: params})
+
+    def without_effect(self, name: str) -> "Model":
+        """A copy with effect ``name`` back at its neutral values."""
+        from . import effects as fx
+
+        if name not in fx.EFFECTS:
+            fx.normalize(name, {})
+        return self.with_effects({name: {k: p.neutral for k, p in fx.EFFECTS[name].params.items()}})
+
+    def _recompiled(self, arm: "_core.Arm") -> "Model":
+        dis = list(self._m.disabled)
+        core = _core.Model(arm, dt=self.dt, integrator=self.integrator, gravity=None if "gravity" in dis else list(self._m.gravity), disable=dis)
+        return Model(payload_kg=self.payload_kg, pressure_pa=self.pressure_pa, _core_model=core)
 
     def with_params(self, *, payload_kg: Optional[float] = None, pressure_pa: Optional[Sequence[float]] = None) -> "Model":
         """A copy with other parameters, sharing the compiled engine model."""
@@ -302,6 +360,7 @@ class Model:
         threads: int = 0,
         check_step: bool = True,
         raise_on_error: bool = True,
+        effects: Any = None,
     ) -> BatchResult:
         """Batched rollouts in parallel (Rust, GIL released), bit-identical to running the
         runs one by one and for any ``threads``.
@@ -311,6 +370,9 @@ class Model:
         ``(N x 3)`` (time samples) or ``(B x N x 3)`` (N = 1: constant per run), encoder_q ``([B] x N x 3)`` with encoder_t ``(N,)`` shared,
         initial_q/initial_v ``([B] x 7)``. Give either torques (with ``duration``) or
         encoder samples. ``threads=0`` uses all cores.
+
+        ``effects``: flat effect vectors ``([B] x NE)`` (see :mod:`popup.effects`) to vary
+        effect parameters across the batch; default the model's own effects.
 
         A failed run raises its error (``raise_on_error``) or leaves NaN rows with the
         message in ``errors``.
@@ -364,6 +426,17 @@ class Model:
         iv = None if initial_v is None else _tile("initial_v", _as_float_array("initial_v", initial_v, np.ndim(initial_v)), nb, 1)
         if iv is not None and iq is None:
             raise InputError("input initial_v: given without initial_q")
+        fx_b = None
+        if effects is not None:
+            fx_arr = np.asarray(effects, dtype=np.float64)
+            if fx_arr.ndim == 2:
+                nb = max(nb, fx_arr.shape[0])
+                pay_b = np.full(nb, pay[0]) if pay.shape[0] == 1 else _tile("payload_kg", pay, nb, 0)
+                pres_b = _tile("pressure_pa", pres, nb, 1)
+                vals_b = _tile("values", vals, nb, 2)
+                iq = None if iq is None else _tile("initial_q", iq, nb, 1)
+                iv = None if iv is None else _tile("initial_v", iv, nb, 1)
+            fx_b = np.ascontiguousarray(_tile("effects", fx_arr, nb, 1))
         if not (np.isfinite(sample_rate) and sample_rate > 0):
             raise InputError(f"input sample_rate: {sample_rate} Hz must be finite and > 0")
         data, errors, alarms, warns = self._m.rollout(
@@ -378,6 +451,7 @@ class Model:
             1.0 / float(sample_rate),
             int(threads),
             bool(check_step),
+            fx_b,
         )
         err_msgs: List[Optional[str]] = [None if e is None else e[1] for e in errors]
         if raise_on_error:
@@ -397,6 +471,7 @@ class Model:
                 "pressure_pa": pres_b,
                 "drive": drive,
                 "sample_rate_hz": float(sample_rate),
+                "effects": self.effects if fx_b is None else [_effects_dict(row) for row in fx_b],
                 "seed": None,
             }
         )

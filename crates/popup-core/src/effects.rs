@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 /// Air density used by `air_drag` [kg/m³] (sea level, 20 °C).
 pub const AIR_DENSITY: f64 = 1.204;
 /// Velocity scale of the smoothed sign in `joint_friction` [rad/s].
-pub const FRICTION_V_EPS: f64 = 1e-3;
+pub const FRICTION_V_EPS: f64 = 1e-2;
 
 /// Coulomb + viscous (+ Stribeck) friction in each motoreducer.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -267,7 +267,7 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
     p("payload_mass", "delta_kg", "kg", 1, 0.0, -50.0, 50.0, true, "true payload minus declared payload"),
     p("payload_mass", "com_offset_m", "m", 3, 0.0, -1.0, 1.0, false, "payload centre offset in the payload body frame"),
     p("sensor_delay", "imu", "s", 1, 0.0, 0.0, 0.5, true, "IMU delay"),
-    p("sensor_delay", "encoder", "s", 1, 0.0, 0.0, 0.5, true, "encoder delay"),
+    p("sensor_delay", "encoder", "s", 1, 0.0, 0.0, 0.5, false, "encoder delay (in replay indistinguishable from equal delays of every other group, so not fitted by default)"),
     p("sensor_delay", "torque", "s", 1, 0.0, 0.0, 0.5, true, "motor-torque delay"),
     p("sensor_delay", "mocap", "s", 1, 0.0, 0.0, 0.5, true, "motion-capture (end-effector) delay"),
     p("actuator_saturation", "tau_max", "N·m", 3, INF, 0.0, INF, true, "torque limit per motor joint"),

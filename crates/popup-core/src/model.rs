@@ -255,6 +255,16 @@ impl Model {
             }
         }
         let wrinkle_coef = spec.wrinkling_coefficient()?;
+        spec.effects.validate()?;
+        for l in 0..2 {
+            if spec.effects.higher_bending_modes.segments[l] != 1.0 || spec.effects.torsion.k_t[l].is_finite() {
+                return Err(Error::param(
+                    format!("effects (link {})", l + 1),
+                    "higher_bending_modes.segments / torsion.k_t",
+                    "extra joints (multi-segment links, torsion) are not available in this build yet",
+                ));
+            }
+        }
         positive("wrinkling.collapse_factor", spec.wrinkling.collapse_factor)?;
 
         let mut motor_idx = Vec::new();

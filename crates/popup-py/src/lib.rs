@@ -21,6 +21,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<arm::PyRigidArm>()?;
     m.add_class::<model::PyModel>()?;
     m.add_function(wrap_pyfunction!(_raise, m)?)?;
+    m.add_function(wrap_pyfunction!(model::effect_registry, m)?)?;
+    m.add("EFFECT_NAMES", popup_core::effects::EFFECT_NAMES.to_vec())?;
     m.add_function(wrap_pyfunction!(cli::run_cli, m)?)?;
     m.add("__version__", popup_core::VERSION)?;
     m.add("BUILD_PROFILE", if cfg!(debug_assertions) { "debug" } else { "release" })?;

@@ -8,6 +8,7 @@ use crate::errors::{describe, make, IntoPy};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use popup_core::drive::{Drive, Linear3, Spline3};
+use popup_core::effects::{Effects, NE};
 use popup_core::kinematics::prbm::frames;
 use popup_core::math::{VecN, NV};
 use popup_core::model::{Disable, Integrator, Model, Options};
@@ -42,7 +43,7 @@ impl PyModel {
     }
 
     fn pd(&self, payload_kg: f64, pressure_pa: [f64; 2]) -> PyResult<ParamData> {
-        ParamData::new(&self.m, &Params { payload_kg, pressure_pa }).py()
+        ParamData::new(&self.m, &Params { payload_kg, pressure_pa, effects: self.m.spec.effects }).py()
     }
 }
 
@@ -223,7 +224,9 @@ impl PyModel {
     /// duration [s] (None for replay = span of `times`); sample_period [s].
     /// Returns (data (B, S, NCH), errors [None | (class, message)], alarms
     /// [[(link, t_start, t_end, peak_ratio)]], warnings [[str]]). Failed rows are NaN.
-    #[pyo3(signature = (payload_kg, pressure_pa, drive, times, values, initial_q = None, initial_v = None, duration = None, sample_period = 1e-3, threads = 0, check_step = true))]
+    /// effects (B, NE) or None: flat effect parameters per job (registry order, see
+    /// `effect_registry()`); None = the arm's `[effects]`.
+    #[pyo3(signature = (payload_kg, pressure_pa, drive, times, values, initial_q = None, initial_v = None, duration = None, sample_period = 1e-3, threads = 0, check_step = true, effects = None))]
     #[allow(clippy::too_many_arguments)]
     fn rollout<'py>(
         &self,
@@ -239,6 +242,7 @@ impl PyModel {
         sample_period: f64,
         threads: usize,
         check_step: bool,
+        effects: Option<PyReadonlyArray2<'py, f64>>,
     ) -> PyResult<RolloutOut<'py>> {
         let bad = |m: String| make(py, "InputError", &m);
         let payload = payload_kg.as_array().to_owned();
@@ -252,6 +256,24 @@ impl PyModel {
         if vals.shape()[0] != nb || vals.shape()[2] != 3 || vals.shape()[1] != t.len() {
             return Err(bad(format!("input values: expected shape ({nb}, {}, 3), got {:?}", t.len(), vals.shape())));
         }
+        let fx = match effects {
+            None => vec![self.m.spec.effects; nb],
+            Some(a) => {
+                let a = a.as_array();
+                if a.shape() != [nb, NE] {
+                    return Err(bad(format!("input effects: expected shape ({nb}, {NE}), got {:?}", a.shape())));
+                }
+                let mut v = Vec::with_capacity(nb);
+                for b in 0..nb {
+                    let row: Vec<f64> = a.row(b).to_vec();
+                    v.push(Effects::from_flat(&row).map_err(|e| {
+                        let (cls, msg) = describe(&e);
+                        make(py, &cls, &format!("{msg} (effects row {b})"))
+                    })?);
+                }
+                v
+            }
+        };
         let iq = initial_q.map(|a| a.as_array().to_owned());
         let iv = initial_v.map(|a| a.as_array().to_owned());
         for (name, a) in [("initial_q", &iq), ("initial_v", &iv)] {
@@ -279,7 +301,7 @@ impl PyModel {
                 v: VecN::from_fn(|i, _| iv.as_ref().map_or(0.0, |v| v[[b, i]])),
             });
             jobs.push(Job {
-                params: Params { payload_kg: payload[b], pressure_pa: [pressure[[b, 0]], pressure[[b, 1]]] },
+                params: Params { payload_kg: payload[b], pressure_pa: [pressure[[b, 0]], pressure[[b, 1]]], effects: fx[b] },
                 run: RunConfig { drive: drv, initial, duration, sample_period, check_step },
             });
         }
@@ -325,4 +347,12 @@ impl PyModel {
     fn __repr__(&self) -> String {
         format!("Model(arm={:?}, dt={}, integrator={:?})", self.m.spec.name, self.m.options.dt, self.m.options.integrator.name())
     }
+}
+
+/// The effect-parameter registry, in flat-vector order: one tuple per parameter
+/// (effect, name, unit, length, neutral, lower, upper, fitted by default, integer, doc).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub fn effect_registry() -> Vec<(&'static str, &'static str, &'static str, usize, f64, f64, f64, bool, bool, &'static str)> {
+    popup_core::effects::PARAMS.iter().map(|p| (p.effect, p.name, p.unit, p.len, p.neutral, p.lo, p.hi, p.fit, p.integer, p.doc)).collect()
 }
