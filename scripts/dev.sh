@@ -21,7 +21,7 @@ setup() {
 case "${1:-}" in
   demo)
     setup
-    "$PY" examples/demo.py
+    "$PY" examples/diagnose_demo.py
     ;;
   test)
     setup

@@ -69,6 +69,7 @@ __all__ = [
     "HistoryStep",
     "diagnose",
     "improve",
+    "model_error",
     "ERROR_DEFINITION",
     "SCORE_THRESHOLD",
     "MIN_RELATIVE_DROP",
@@ -799,6 +800,15 @@ def _prepare(model: "Model", run: MeasuredRun, channels: Optional[Sequence[str]]
     cmp = compare(model, run, channels=channels, sample_rate=sample_rate)
     sr = float(cmp.simulated.params.get("sample_rate_hz", 0.0)) or 1.0 / float(np.median(np.diff(cmp.simulated.time)))
     return cmp, cmp.channels, sr
+
+
+def model_error(model: "Model", run: MeasuredRun, *, channels: Optional[Sequence[str]] = None, sample_rate: Optional[float] = None) -> Tuple[float, Dict[str, float]]:
+    """Overall error (:data:`ERROR_DEFINITION`) and per-channel NRMSE of ``model`` on
+    ``run``, computed exactly as the diagnosis predicts it."""
+    cmp, chans, sr = _prepare(model, run, channels, sample_rate)
+    prob = _Problem(model, run, chans, sr, 0)
+    r = prob.residuals(prob.simulate(model.effects_flat[None]))[0]
+    return prob.error(r)
 
 
 def diagnose(
