@@ -1,0 +1,82 @@
+"""`popup diagnose` (CLI, JSON contract) and the self-contained HTML report, on the
+bundled example run."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import popup
+
+RUN = Path(__file__).resolve().parents[1] / "examples" / "data" / "lab_run"
+FAST = "payload_mass,joint_friction,backlash,sensor_delay"
+
+
+@pytest.fixture(scope="module")
+def cli_json(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "report.html"
+    r = subprocess.run(
+        [sys.executable, "-m", "popup", "diagnose", str(RUN), "--json", "--effects", FAST, "--report", str(out)],
+        capture_output=True, text=True, timeout=900,
+    )
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout), out
+
+
+def test_json_contract(cli_json):
+    d, _ = cli_json
+    assert d["run"] == str(RUN)
+    assert isinstance(d["nominal_error"], float) and d["nominal_error"] > 0
+    assert "NRMSE" in d["error_definition"]
+    names = [s["effect"] for s in d["suspects"]]
+    assert sorted(names) == sorted(FAST.split(","))
+    for s in d["suspects"]:
+        assert set(s) >= {"effect", "significant", "score", "params", "error_after"}
+    # the bundled run hides a heavier payload and friction: both are found, in two rounds
+    hist = d["history"]
+    assert hist[0] == {**hist[0], "effects": [], "error": d["nominal_error"]}
+    assert [h["effects"] for h in hist] == [[], ["payload_mass"], ["payload_mass", "joint_friction"]]
+    assert hist[1]["error"] < 0.5 * hist[0]["error"] and hist[2]["error"] < hist[1]["error"]
+    assert d["suspects"][0]["effect"] == "payload_mass" and d["suspects"][0]["significant"]
+    assert abs(d["suspects"][0]["params"]["delta_kg"][0] - 0.3) < 0.02
+
+
+def test_html_report_is_self_contained(cli_json):
+    _, path = cli_json
+    text = path.read_text(encoding="utf-8")
+    assert text.startswith("<!DOCTYPE html>")
+    assert len(re.findall(r'src="data:image/png;base64,', text)) >= 5
+    assert not re.search(r'(src|href)="(http|/|\.)', text), "external reference in the report"
+    data = json.loads(re.search(r"<script type='application/json' id='popup-data'>(.*?)</script>", text, re.S).group(1))
+    assert [h["effects"] for h in data["history"]][-1] == ["payload_mass", "joint_friction"]
+
+
+def test_text_output_and_bad_run(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "popup", "diagnose", str(tmp_path / "nope")], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert "popup diagnose: error" in r.stderr and "nope" in r.stderr
+    r = subprocess.run([sys.executable, "-m", "popup", "diagnose", str(RUN), "--effects", "payload_mass", "--max-rounds", "1"],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert "payload_mass" in r.stdout and "error history" in r.stdout
+    r = subprocess.run([sys.executable, "-m", "popup", "diagnose", str(RUN), "--effects", "friction"], capture_output=True, text=True)
+    assert r.returncode == 2 and "must be one of" in r.stderr
+
+
+def test_history_and_diagnosis_objects_plot_and_tabulate():
+    run = popup.read_run(RUN)
+    h = popup.improve(run.model(), run, effects=["payload_mass"], max_rounds=1)
+    assert h.effects == ["payload_mass"]
+    df = h.to_pandas()
+    assert list(df["effects"]) == ["nominal", "payload_mass"]
+    assert df["error"].iloc[1] < df["error"].iloc[0]
+    ax = h.plot()
+    assert len(ax.lines) >= 2
+    ax = h.diagnoses[0].plot()
+    assert ax.patches
+    assert h.model.effects["payload_mass"]["delta_kg"][0] == pytest.approx(0.3, abs=0.02)
