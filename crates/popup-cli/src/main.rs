@@ -7,7 +7,7 @@ use clap::{Parser, Subcommand};
 use popup_core::drive::{Drive, Linear3};
 use popup_core::math::VecN;
 use popup_core::model::{Integrator, Model, Options};
-use popup_core::params::{ParamData, Params};
+use popup_core::params::{Flex, ParamData, Params};
 use popup_core::sensor::{CHANNELS, NCH};
 use popup_core::sim::{rest_state, run, RunConfig};
 use popup_core::spec::ArmSpec;
@@ -98,7 +98,7 @@ fn params(spec: &ArmSpec, a: &ArmArgs) -> popup_core::Result<Params> {
         return Err(popup_core::Error::input("--pressure-pa", "expected 2 pressures p1,p2 [Pa]"));
     }
     let p = a.pressure_pa.clone().unwrap_or_else(|| vec![spec.links[0].pressure_pa, spec.links[1].pressure_pa]);
-    Ok(Params { payload_kg: a.payload_kg.unwrap_or(spec.payload.default_kg), pressure_pa: [p[0], p[1]] })
+    Ok(Params { payload_kg: a.payload_kg.unwrap_or(spec.payload.default_kg), pressure_pa: [p[0], p[1]], flex: Flex::default() })
 }
 
 fn main() -> ExitCode {
@@ -149,7 +149,7 @@ fn go(cli: Cli) -> popup_core::Result<()> {
             let g = gravity_torque(&model, &pd, &st.q);
             let hold = model.motor_idx.map(|i| g[i]);
             st.v = VecN::zeros();
-            st.v[model.bend_idx[3]] = kick;
+            st.v[model.root_bend_idx[3]] = kick;
             let cfg = RunConfig {
                 drive: Drive::Torque(Linear3::new(&[0.0], &[hold])?),
                 initial: Some(st),

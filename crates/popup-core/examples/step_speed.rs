@@ -4,7 +4,7 @@
 
 use popup_core::drive::{Drive, Linear3, Spline3};
 use popup_core::model::{Integrator, Model, Options};
-use popup_core::params::{ParamData, Params};
+use popup_core::params::{Flex, ParamData, Params};
 use popup_core::sim::{rest_state, run, RunConfig};
 use popup_core::spec::ArmSpec;
 use popup_core::statics::gravity_torque;
@@ -15,7 +15,7 @@ fn main() {
     for integ in [Integrator::Rk4, Integrator::SemiImplicit] {
         for dt in [1e-3, 5e-4] {
             let model = Model::compile(&ArmSpec::popup_lab(), Options { dt, integrator: integ, ..Options::default() }).unwrap();
-            let pd = ParamData::new(&model, &Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3] }).unwrap();
+            let pd = ParamData::new(&model, &Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3], flex: Flex::default() }).unwrap();
             let st = rest_state(&model, &pd, 0.0, [0.0, -1.2, 0.4]).unwrap();
             let g = gravity_torque(&model, &pd, &st.q);
             let hold = model.motor_idx.map(|i| g[i]);

@@ -1,23 +1,25 @@
 //! Forward dynamics of the arm with its drive: q̈ = f(t, q, q̇).
 //!
 //! `(M(q) + diag(armature) + h·C_free) q̈ = τ_drive + τ_passive − b(q, q̇)`, where `b` is the
-//! RNEA bias (Coriolis, centrifugal, gravity), `τ_passive = −k δ − c δ̇` on bending joints
-//! and `h` is the implicit-damping step of the semi-implicit integrator (0 for RK4). In
-//! replay the motor rows are replaced by the prescribed accelerations, so the same
-//! Cholesky solve gives the bending accelerations with the motors following the encoders.
+//! RNEA bias (Coriolis, centrifugal, gravity), `τ_passive = −k δ − c δ̇` on the passive
+//! (bending and torsion) joints and `h` is the implicit-damping step of the semi-implicit
+//! integrator (0 for RK4). In replay the motor rows are replaced by the prescribed
+//! accelerations, so the same Cholesky solve gives the passive-joint accelerations with the
+//! motors following the encoders. Everything works on the leading `nv` block.
 
 use crate::drive::Drive;
 use crate::dynamics::{crba, rnea};
-use crate::math::{MatN, VecN, NV};
+use crate::math::{cholesky_solve, MatN, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
 
-/// Passive joint forces `−k δ − c δ̇` on the bending joints [N·m] (respecting `disable`).
+/// Passive joint forces `−k δ − c δ̇` on the bending and torsion joints [N·m] (respecting
+/// `disable`).
 #[inline]
 pub fn passive(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> VecN {
     let d = &model.options.disable;
     let mut t = VecN::zeros();
-    for &b in &model.bend_idx {
+    for &b in model.passive() {
         let mut f = 0.0;
         if !d.spring {
             f -= pd.k[b] * q[b];
@@ -30,12 +32,12 @@ pub fn passive(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> VecN {
     t
 }
 
-/// Damping coefficients on the free (bending) joints, for implicit damping.
+/// Damping coefficients on the passive (bending and torsion) joints, for implicit damping.
 #[inline]
 pub fn damping_diag(model: &Model, pd: &ParamData) -> VecN {
     let mut c = VecN::zeros();
     if !model.options.disable.damper {
-        for &b in &model.bend_idx {
+        for &b in model.passive() {
             c[b] = pd.c[b];
         }
     }
@@ -64,9 +66,9 @@ pub fn prescribe(model: &Model, drive: &Drive, t: f64, q: &mut VecN, v: &mut Vec
 #[inline]
 pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64) -> VecN {
     let rot = model.rotations(q);
-    let m = crba(model, &pd.body, &rot);
+    let mut m = crba(model, &pd.body, &rot);
     let b = rnea(model, &pd.body, &rot, v, &VecN::zeros(), &model.gravity);
-    solve_accel(model, pd, drive, t, q, v, am, h_implicit, &m, &b)
+    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, &mut m, &b)
 }
 
 /// [`accel`] given the bare-chain mass matrix `m` and bias `b` at (q, v).
@@ -74,13 +76,21 @@ pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: 
 #[allow(clippy::too_many_arguments)]
 pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &MatN, b: &VecN) -> VecN {
     let mut m: MatN = *m;
+    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, &mut m, b)
+}
+
+/// [`solve_accel`] that overwrites `m` (with the Cholesky factor of the system matrix).
+#[inline]
+#[allow(clippy::too_many_arguments)]
+fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN, b: &VecN) -> VecN {
+    let n = model.nv;
     let mut rhs = passive(model, pd, q, v) - b;
-    for i in 0..NV {
+    for i in 0..n {
         m[(i, i)] += model.armature[i];
     }
     if h_implicit > 0.0 {
         let c = damping_diag(model, pd);
-        for i in 0..NV {
+        for i in 0..n {
             m[(i, i)] += h_implicit * c[i];
         }
     }
@@ -93,12 +103,12 @@ pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
         }
         (Drive::Replay(_), Some(am)) => {
             for (k, &p) in model.motor_idx.iter().enumerate() {
-                for f in 0..NV {
+                for f in 0..n {
                     rhs[f] -= m[(f, p)] * am[k];
                 }
             }
             for (k, &p) in model.motor_idx.iter().enumerate() {
-                for f in 0..NV {
+                for f in 0..n {
                     m[(f, p)] = 0.0;
                     m[(p, f)] = 0.0;
                 }
@@ -108,8 +118,10 @@ pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
         }
         (Drive::Replay(_), None) => unreachable!("replay accelerations must be prescribed"),
     }
-    match m.cholesky() {
-        Some(ch) => ch.solve(&rhs),
-        None => VecN::from_element(f64::NAN),
+    if !cholesky_solve(m, &mut rhs, n) {
+        for i in 0..n {
+            rhs[i] = f64::NAN;
+        }
     }
+    rhs
 }

@@ -3,8 +3,29 @@
 //! body inertias with the payload).
 
 use crate::error::{Error, Result};
-use crate::math::{Mat3, NV};
+use crate::math::{Mat3, NMAX};
 use crate::model::{Model, Rbi};
+
+/// Per-rollout numbers of the extra joints (effects `higher_bending_modes` and `torsion`).
+/// Neutral values: `seg_k_scale = 1`, and the torsion entries are ignored for a link
+/// without a torsion joint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Flex {
+    /// Factor on the stiffness and damping of every bending joint of link l (all its
+    /// segments), finite and > 0. Neutral 1.0.
+    pub seg_k_scale: [f64; 2],
+    /// Torsional stiffness of link l's torsion joint [N·m/rad], > 0; must be finite when
+    /// the model has that joint. Default +∞ (no torsion joint: rigid in torsion).
+    pub k_t: [f64; 2],
+    /// Torsional damping of link l's torsion joint [N·m·s/rad], finite and >= 0. Default 0.
+    pub c_t: [f64; 2],
+}
+
+impl Default for Flex {
+    fn default() -> Self {
+        Flex { seg_k_scale: [1.0, 1.0], k_t: [f64::INFINITY; 2], c_t: [0.0, 0.0] }
+    }
+}
 
 /// Parameters of one rollout.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -14,6 +35,8 @@ pub struct Params {
     /// Relative inflation pressure of link 1 and link 2 [Pa], >= 0. k(p), c(p) are
     /// interpolated linearly in the arm's table and clamped (with a warning) outside it.
     pub pressure_pa: [f64; 2],
+    /// Segment stiffness scale and torsion spring/damper.
+    pub flex: Flex,
 }
 
 impl Params {
@@ -22,6 +45,7 @@ impl Params {
         Params {
             payload_kg: model.spec.payload.default_kg,
             pressure_pa: [model.spec.links[0].pressure_pa, model.spec.links[1].pressure_pa],
+            flex: Flex::default(),
         }
     }
 }
@@ -31,14 +55,17 @@ impl Params {
 pub struct ParamData {
     /// The parameters.
     pub params: Params,
-    /// Spring stiffness per chain joint (0 on motors) [N·m/rad].
-    pub k: [f64; NV],
-    /// Damping per chain joint (0 on motors) [N·m·s/rad].
-    pub c: [f64; NV],
+    /// Spring stiffness per chain joint (0 on motors and beyond `nv`) [N·m/rad]. Bending
+    /// joints of link l: k(p) · link scale · segment factor · `seg_k_scale[l]`; torsion:
+    /// `k_t[l]`.
+    pub k: [f64; NMAX],
+    /// Damping per chain joint (0 on motors and beyond `nv`) [N·m·s/rad], as `k` with c(p)
+    /// and `c_t`.
+    pub c: [f64; NMAX],
     /// Wrinkling-onset moment per link M_w = coef · p · r³ [N·m].
     pub mw: [f64; 2],
     /// Body inertias about their frame origins, payload included.
-    pub body: [Rbi; NV],
+    pub body: [Rbi; NMAX],
     /// Warnings raised while deriving (pressure outside the table, ...).
     pub warnings: Vec<String>,
 }
@@ -61,10 +88,34 @@ impl ParamData {
     /// Derive the per-rollout numbers.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] for a NaN/negative payload or pressure.
+    /// [`Error::InvalidParameter`] for a NaN/negative payload or pressure, a non-finite or
+    /// non-positive `flex.seg_k_scale`, a NaN or non-positive `flex.k_t`, a non-finite or
+    /// negative `flex.c_t`, or an infinite `flex.k_t` for a link that has a torsion joint.
     pub fn new(model: &Model, params: &Params) -> Result<ParamData> {
         if !(params.payload_kg.is_finite() && params.payload_kg >= 0.0) {
             return Err(Error::param("payload_kg", params.payload_kg, "must be finite and >= 0 kg"));
+        }
+        let f = &params.flex;
+        for l in 0..2 {
+            let s = f.seg_k_scale[l];
+            if !(s.is_finite() && s > 0.0) {
+                return Err(Error::param(format!("flex.seg_k_scale[{l}] (link {})", l + 1), s, "must be finite and > 0 (neutral 1)"));
+            }
+            let kt = f.k_t[l];
+            if kt.is_nan() || kt <= 0.0 {
+                return Err(Error::param(format!("flex.k_t[{l}] (link {})", l + 1), kt, "must be > 0 N·m/rad"));
+            }
+            if model.torsion_idx[l].is_some() && kt.is_infinite() {
+                return Err(Error::param(
+                    format!("flex.k_t[{l}] (link {})", l + 1),
+                    kt,
+                    "must be finite: the model has a torsion joint for this link (Options.structure.torsion); give its torsional stiffness",
+                ));
+            }
+            let ct = f.c_t[l];
+            if !(ct.is_finite() && ct >= 0.0) {
+                return Err(Error::param(format!("flex.c_t[{l}] (link {})", l + 1), ct, "must be finite and >= 0 N·m·s/rad"));
+            }
         }
         let mut warnings = Vec::new();
         let t = &model.spec.stiffness;
@@ -90,11 +141,18 @@ impl ParamData {
             cl[l] = c * model.link_scale[l];
             mw[l] = model.wrinkle_coef * p * model.link_radius[l].powi(3);
         }
-        let mut k = [0.0; NV];
-        let mut c = [0.0; NV];
-        for &b in &model.bend_idx {
-            k[b] = kl[model.joints[b].link];
-            c[b] = cl[model.joints[b].link];
+        let mut k = [0.0; NMAX];
+        let mut c = [0.0; NMAX];
+        for &b in model.bend() {
+            let l = model.joints[b].link;
+            k[b] = kl[l] * model.seg_factor[l] * f.seg_k_scale[l];
+            c[b] = cl[l] * model.seg_factor[l] * f.seg_k_scale[l];
+        }
+        for l in 0..2 {
+            if let Some(t) = model.torsion_idx[l] {
+                k[t] = f.k_t[l];
+                c[t] = f.c_t[l];
+            }
         }
         let mut body = model.body;
         let pb = model.payload_body;

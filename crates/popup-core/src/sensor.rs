@@ -4,12 +4,19 @@
 //! IMUs read specific force `a − g` at their mount in the mount body's axes; the bending
 //! moment of joint j is `k δ_j + c δ̇_j`; `m*_ratio` is |M| of the link's universal joint
 //! (both axes combined) over the wrinkling-onset moment M_w = coef · p · r³.
+//!
+//! With several segments per link (`higher_bending_modes`) the channels keep their meaning
+//! for the link as a whole: `d11` (`d12`) is the sum of the first- (second-) axis angles of
+//! all the link's universal joints (the small-angle tip rotation relative to the root),
+//! `dd*` the sum of their rates, and `m11..m22`, `m*_ratio` are the moments at the link's
+//! ROOT universal joint (first segment), where the bending moment is largest and wrinkling
+//! starts. The torsion joints have no channel of their own; `energy` includes their springs.
 
 use crate::drive::Drive;
 use crate::dynamics::{crba, forward_pass, rnea};
 use crate::forward::solve_accel;
 use crate::kinematics::prbm::{frames_with, Frames};
-use crate::math::{MatN, Vec3, VecN, NV};
+use crate::math::{dot_n, mat_vec_row, MatN, Vec3, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
 
@@ -35,13 +42,14 @@ pub fn channel_index(name: &str) -> Option<usize> {
     CHANNELS.iter().position(|c| *c == name)
 }
 
-/// Bending moments `k δ + c δ̇` of the four bending joints [N·m] and |M|/M_w per link.
+/// Bending moments `k δ + c δ̇` of the root universal joints `[d11, d12, d21, d22]` [N·m]
+/// and |M|/M_w per link.
 #[inline]
 pub fn bending_moments(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> ([f64; 4], [f64; 2]) {
     let d = &model.options.disable;
     let mut m = [0.0; 4];
     let mut sq = [0.0; 2];
-    for (a, &b) in model.bend_idx.iter().enumerate() {
+    for (a, &b) in model.root_bend_idx.iter().enumerate() {
         let ks = if d.spring { 0.0 } else { pd.k[b] };
         let cs = if d.damper { 0.0 } else { pd.c[b] };
         m[a] = ks * q[b] + cs * v[b];
@@ -51,7 +59,8 @@ pub fn bending_moments(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> ([f
     (m, ratio)
 }
 
-/// Total mechanical energy: kinetic (armature included) + gravity + spring [J].
+/// Total mechanical energy: kinetic (armature included) + gravity + springs (every bending
+/// segment and torsion joint) [J].
 pub fn energy(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> f64 {
     let rot = model.rotations(q);
     let m = crba(model, &pd.body, &rot);
@@ -59,18 +68,23 @@ pub fn energy(model: &Model, pd: &ParamData, q: &VecN, v: &VecN) -> f64 {
 }
 
 fn energy_with(model: &Model, pd: &ParamData, q: &VecN, v: &VecN, m: &MatN, f: &Frames) -> f64 {
-    let mut kin = 0.5 * v.dot(&(m * v));
-    for i in 0..NV {
+    let n = model.nv;
+    let mut mv = VecN::zeros();
+    for i in 0..n {
+        mv[i] = mat_vec_row(m, v, i, n);
+    }
+    let mut kin = 0.5 * dot_n(v, &mv, n);
+    for i in 0..n {
         kin += 0.5 * model.armature[i] * v[i] * v[i];
     }
     let mut pot = 0.0;
-    for i in 0..NV {
+    for i in 0..n {
         let b = &pd.body[i];
         let mc_w = f.p_wb[i + 1] * b.m + f.r_wb[i + 1] * b.h;
         pot -= model.gravity.dot(&mc_w);
     }
     if !model.options.disable.spring {
-        for &b in &model.bend_idx {
+        for &b in model.passive() {
             pot += 0.5 * pd.k[b] * q[b] * q[b];
         }
     }
@@ -88,13 +102,13 @@ pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v:
     let qdd = solve_accel(model, pd, drive, t, q, v, am, 0.0, &m, &b);
     let bm = forward_pass(model, &rot, v, &qdd, &(-model.gravity));
     let fr = frames_with(model, &rot);
-    let tau_all = m * qdd + b;
     row[0] = t;
     for k in 0..3 {
         let i = model.motor_idx[k];
         row[1 + k] = q[i];
         row[4 + k] = v[i];
-        row[7 + k] = tau_all[i];
+        // row i of M q̈ + b
+        row[7 + k] = mat_vec_row(&m, &qdd, i, model.nv) + b[i];
     }
     let ee = fr.point(model.ee.0 + 1, &model.ee.1);
     row[10..13].copy_from_slice(ee.as_slice());
@@ -107,9 +121,16 @@ pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v:
     row[19] = pd.params.pressure_pa[0];
     row[20] = pd.params.pressure_pa[1];
     let (mom, ratio) = bending_moments(model, pd, q, v);
-    for (a, &b) in model.bend_idx.iter().enumerate() {
-        row[21 + a] = q[b];
-        row[25 + a] = v[b];
+    for a in 0..4 {
+        // sum over the link's segments, root first (exactly q[root] for one segment)
+        let js = model.channel_joints(a);
+        let (mut d, mut dd) = (q[js[0]], v[js[0]]);
+        for &j in &js[1..] {
+            d += q[j];
+            dd += v[j];
+        }
+        row[21 + a] = d;
+        row[25 + a] = dd;
         row[29 + a] = mom[a];
     }
     row[33] = ratio[0];

@@ -5,7 +5,7 @@ use crate::drive::Drive;
 use crate::error::{Error, Result};
 use crate::forward::prescribe;
 use crate::integrate::step;
-use crate::math::{VecN, NV};
+use crate::math::VecN;
 use crate::model::{Integrator, Model};
 use crate::params::ParamData;
 use crate::sensor::{bending_moments, sample, NCH};
@@ -19,9 +19,9 @@ pub const MAX_JOINT_SPEED: f64 = 1e4;
 pub struct State {
     /// Time [s].
     pub t: f64,
-    /// Joint coordinates, chain order [rad].
+    /// Joint coordinates, chain order [rad] (entries `>= nv` are 0).
     pub q: VecN,
-    /// Joint rates [rad/s].
+    /// Joint rates [rad/s] (entries `>= nv` are 0).
     pub v: VecN,
 }
 
@@ -69,8 +69,8 @@ pub struct RunConfig {
     pub check_step: bool,
 }
 
-/// Initial state at rest with the motors at `qm` and the bending joints in static
-/// equilibrium.
+/// Initial state at rest with the motors at `qm` and the passive (bending and torsion)
+/// joints in static equilibrium.
 ///
 /// # Errors
 /// As [`static_equilibrium`].
@@ -84,12 +84,12 @@ pub fn rest_state(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result
 }
 
 /// Check `dt` against the linearised arm about `q` (free joints: all in torque drive,
-/// bending joints in replay).
+/// passive joints in replay).
 ///
 /// # Errors
 /// [`Error::StepTooLarge`] naming the mode, its joint and the largest stable step.
 pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Result<()> {
-    let free: Vec<usize> = if replay { model.bend_idx.to_vec() } else { (0..NV).collect() };
+    let free: Vec<usize> = if replay { model.passive().to_vec() } else { (0..model.nv).collect() };
     let h = model.options.dt;
     let integ = model.options.integrator;
     let eigs = linear_eigs(model, pd, q, &free, integ == Integrator::Rk4);
@@ -144,7 +144,7 @@ pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Resu
 fn diverged(model: &Model, k: usize, t: f64, q: &VecN, v: &VecN) -> Option<Error> {
     let mut worst: Option<(usize, String)> = None;
     let mut vmax = 0.0;
-    for i in 0..NV {
+    for i in 0..model.nv {
         if !q[i].is_finite() || !v[i].is_finite() {
             worst = Some((i, format!("q = {} rad, v = {} rad/s (non-finite)", q[i], v[i])));
             break;
@@ -198,9 +198,17 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
     let nstep = (duration / dt + 1e-9).floor() as usize;
     let mut st = match cfg.initial {
         Some(s) => {
-            for i in 0..NV {
+            for i in 0..model.nv {
                 if !s.q[i].is_finite() || !s.v[i].is_finite() {
                     return Err(Error::input("initial state", format!("joint {} has q = {}, v = {}", model.joint_name(i), s.q[i], s.v[i])));
+                }
+            }
+            for i in model.nv..s.q.len() {
+                if s.q[i] != 0.0 || s.v[i] != 0.0 {
+                    return Err(Error::input(
+                        "initial state",
+                        format!("entry {i} has q = {}, v = {}, but the model has {} joints: entries beyond them must be 0", s.q[i], s.v[i], model.nv),
+                    ));
                 }
             }
             s

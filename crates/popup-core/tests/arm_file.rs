@@ -8,7 +8,7 @@ use popup_core::error::Error;
 use popup_core::kinematics::prbm::end_effector;
 use popup_core::math::VecN;
 use popup_core::model::{Model, Options};
-use popup_core::params::{ParamData, Params};
+use popup_core::params::{Flex, ParamData, Params};
 use popup_core::sim::{rest_state, run, RunConfig};
 use popup_core::spec::ArmSpec;
 use popup_core::statics::gravity_torque;
@@ -68,7 +68,7 @@ mass_kg = 3.0           # elbow motoreducer 1.5 → 3 kg
 
     let lab = Model::compile(&ArmSpec::popup_lab(), Options::default()).unwrap();
     let new = Model::compile(&spec, Options::default()).unwrap();
-    let p = Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3] };
+    let p = Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3], flex: Flex::default() };
     let (pd0, pd1) = (ParamData::new(&lab, &p).unwrap(), ParamData::new(&new, &p).unwrap());
     let b12 = lab.bend_idx[1];
     let b22 = lab.bend_idx[3];
@@ -141,7 +141,7 @@ fn canadarm3_file_compiles_and_runs() {
     }
     let sag = end_effector(&model, &s0.q).z - end_effector(&model, &rigid).z;
     let modes = popup_core::statics::locked_modes(&model, &pd, &s0.q);
-    println!("canadarm3 at {q0:?}: bending {:?}, tip sag {sag:.4} m, locked modes {modes:.2?} rad/s", model.bend_idx.map(|b| s0.q[b]));
+    println!("canadarm3 at {q0:?}: bending {:?}, tip sag {sag:.4} m, locked modes {modes:.2?} rad/s", model.root_bend_idx.map(|b| s0.q[b]));
     assert!(sag < 0.0 && sag > -0.5, "tip sag {sag} m under lunar gravity");
     // hold against lunar gravity, then a 50 N·m step on the shoulder pitch
     let g = gravity_torque(&model, &pd, &s0.q);

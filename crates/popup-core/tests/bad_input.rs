@@ -8,7 +8,7 @@ use popup_core::drive::{Drive, Linear3, Spline3};
 use popup_core::error::Error;
 use popup_core::math::VecN;
 use popup_core::model::{Integrator, Model, Options};
-use popup_core::params::{ParamData, Params};
+use popup_core::params::{Flex, ParamData, Params};
 use popup_core::rollout::{run_job, Job};
 use popup_core::sim::{run, RunConfig, State};
 use popup_core::spec::ArmSpec;
@@ -20,7 +20,7 @@ fn lab(dt: f64, integ: Integrator) -> Model {
 }
 
 fn defaults() -> Params {
-    Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3] }
+    Params { payload_kg: 2.0, pressure_pa: [30e3, 30e3], flex: Flex::default() }
 }
 
 fn expect_param(r: popup_core::Result<impl std::fmt::Debug>, what: &str, facts: &[&str]) -> String {

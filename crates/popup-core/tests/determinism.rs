@@ -7,7 +7,7 @@ mod common;
 use common::Rng;
 use popup_core::drive::{Drive, Linear3, Spline3};
 use popup_core::model::{Integrator, Model, Options};
-use popup_core::params::Params;
+use popup_core::params::{Flex, Params};
 use popup_core::rollout::{rollout, run_job, Job};
 use popup_core::sim::{RunConfig, Trajectory};
 use popup_core::spec::ArmSpec;
@@ -27,7 +27,7 @@ fn jobs() -> Vec<Job> {
     let mut rng = Rng(2024);
     (0..16)
         .map(|n| {
-            let params = Params { payload_kg: rng.uniform(0.0, 4.0), pressure_pa: [rng.uniform(8e3, 95e3), rng.uniform(8e3, 95e3)] };
+            let params = Params { payload_kg: rng.uniform(0.0, 4.0), pressure_pa: [rng.uniform(8e3, 95e3), rng.uniform(8e3, 95e3)], flex: Flex::default() };
             let drive = if n % 3 == 2 {
                 let t: Vec<f64> = (0..=40).map(|k| k as f64 * 0.0125).collect();
                 let (a, w) = (rng.uniform(0.1, 0.5), rng.uniform(2.0, 8.0));

@@ -19,7 +19,7 @@ use common::{col, constant_torque, Rng};
 use popup_core::dynamics::{crba, rnea};
 use popup_core::math::VecN;
 use popup_core::model::{Disable, Model, Options};
-use popup_core::params::{ParamData, Params};
+use popup_core::params::{Flex, ParamData, Params};
 use popup_core::sim::{run, RunConfig, State};
 use popup_core::spec::arm::{PartShape, PartSpec};
 use popup_core::spec::ArmSpec;
@@ -47,7 +47,7 @@ fn double_pendulum_block_matches_closed_form() {
     let mut worst: f64 = 0.0;
     for n in 0..40 {
         let payload = rng.uniform(0.0, 4.0);
-        let pd = ParamData::new(&model, &Params { payload_kg: payload, pressure_pa: [30e3, 30e3] }).unwrap();
+        let pd = ParamData::new(&model, &Params { payload_kg: payload, pressure_pa: [30e3, 30e3], flex: Flex::default() }).unwrap();
         // numbers from reference-arm.md, combined by hand
         let (m1, c1, i1) = link(&[
             (0.03, 0.015, tube_perp(0.03, r1, 0.03)),
@@ -153,7 +153,7 @@ fn simple_pendulum_period() {
     let spec = pendulum_spec(l);
     let opts = Options { dt: 1e-3, disable: Disable { spring: true, damper: true, gravity: false }, ..Options::default() };
     let model = Model::compile(&spec, opts).unwrap();
-    let pd = ParamData::new(&model, &Params { payload_kg: 3.7, pressure_pa: [30e3, 30e3] }).unwrap();
+    let pd = ParamData::new(&model, &Params { payload_kg: 3.7, pressure_pa: [30e3, 30e3], flex: Flex::default() }).unwrap();
     let iq2 = model.motor_idx[1];
     for theta0 in [0.01, 0.5, 1.5] {
         let mut q = VecN::zeros();

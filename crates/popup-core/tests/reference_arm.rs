@@ -4,7 +4,7 @@
 use popup_core::kinematics::prbm::end_effector;
 use popup_core::math::VecN;
 use popup_core::model::{Model, Options};
-use popup_core::params::{ParamData, Params};
+use popup_core::params::{Flex, ParamData, Params};
 use popup_core::sim::rest_state;
 use popup_core::spec::ArmSpec;
 use std::f64::consts::FRAC_PI_2;
@@ -30,7 +30,7 @@ const ROWS: [Row; 5] = [
 fn reference_table_reproduced() {
     let model = Model::compile(&ArmSpec::popup_lab(), Options::default()).unwrap();
     for row in &ROWS {
-        let pd = ParamData::new(&model, &Params { payload_kg: row.payload, pressure_pa: [30e3, 30e3] }).unwrap();
+        let pd = ParamData::new(&model, &Params { payload_kg: row.payload, pressure_pa: [30e3, 30e3], flex: Flex::default() }).unwrap();
         let st = rest_state(&model, &pd, 0.0, row.motors).unwrap();
         let (d11, d12, d21, d22) = (st.q[2], st.q[3], st.q[5], st.q[6]);
         println!("payload {} motors {:?}: d11 {d11:.6} d12 {d12:.6} d21 {d21:.6} d22 {d22:.6}", row.payload, row.motors);

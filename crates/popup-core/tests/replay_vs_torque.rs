@@ -22,7 +22,7 @@ use common::{col, orders, state_of_row};
 use popup_core::drive::{Drive, Linear3, Spline3};
 use popup_core::forward::accel;
 use popup_core::model::{Model, Options};
-use popup_core::params::{ParamData, Params};
+use popup_core::params::{Flex, ParamData, Params};
 use popup_core::sim::{rest_state, run, RunConfig};
 use popup_core::spec::ArmSpec;
 use popup_core::statics::gravity_torque;
@@ -40,7 +40,7 @@ struct Result {
 
 fn compare(dt: f64) -> Result {
     let model = Model::compile(&ArmSpec::popup_lab(), Options { dt, ..Options::default() }).unwrap();
-    let pd = ParamData::new(&model, &Params { payload_kg: 1.5, pressure_pa: [25e3, 40e3] }).unwrap();
+    let pd = ParamData::new(&model, &Params { payload_kg: 1.5, pressure_pa: [25e3, 40e3], flex: Flex::default() }).unwrap();
     let q0 = [0.2, -FRAC_PI_2 + 0.5, 0.3];
     let s0 = rest_state(&model, &pd, 0.0, q0).unwrap();
     let g = gravity_torque(&model, &pd, &s0.q);

@@ -5,19 +5,20 @@
 //! so `M_ii = S_iᵀ Ic_i S_i` and the off-diagonal terms follow by transforming the force
 //! `Ic_i S_i` down the chain.
 
-use crate::math::{Mat3, MatN, NV};
+use crate::math::{Mat3, MatN, NMAX};
 use crate::model::{Model, Rbi};
 
-/// Mass matrix M(q) (nv × nv) [kg·m²] without armature.
+/// Mass matrix M(q) (leading nv × nv block; the rest 0) [kg·m²] without armature.
 #[inline]
-pub fn crba(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV]) -> MatN {
+pub fn crba(model: &Model, body: &[Rbi; NMAX], rot: &[Mat3; NMAX]) -> MatN {
+    let nv = model.nv;
     let mut m = MatN::zeros();
     let mut ic = *body;
-    for i in (1..NV).rev() {
+    for i in (1..nv).rev() {
         let c = ic[i].to_parent(&rot[i], &model.joints[i].r);
         ic[i - 1] = ic[i - 1].add(&c);
     }
-    for i in 0..NV {
+    for i in 0..nv {
         let ji = &model.joints[i];
         let (sw, sv) = (ji.u, ji.u.cross(&ji.r));
         let c = &ic[i];
