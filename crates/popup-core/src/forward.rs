@@ -8,7 +8,7 @@
 //! motors following the encoders. Everything works on the leading `nv` block.
 
 use crate::drive::Drive;
-use crate::dynamics::{crba, rnea};
+use crate::dynamics::{crba_into, rnea};
 use crate::math::{cholesky_solve, MatN, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
@@ -64,11 +64,21 @@ pub fn prescribe(model: &Model, drive: &Drive, t: f64, q: &mut VecN, v: &mut Vec
 /// Joint accelerations at time `t` [rad/s²]. `q`, `v` must already be prescribed for
 /// replay (see [`prescribe`]); `h_implicit` is 0 for explicit evaluation.
 #[inline]
+#[allow(clippy::too_many_arguments)]
 pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64) -> VecN {
+    accel_with(model, pd, drive, t, q, v, am, h_implicit, &mut MatN::zeros())
+}
+
+/// [`accel`] with a scratch matrix `m` that is zero outside the leading nv × nv block (and
+/// is left so): the integrators keep one per run instead of clearing a 17 × 17 matrix at
+/// every evaluation.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn accel_with(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN) -> VecN {
     let rot = model.rotations(q);
-    let mut m = crba(model, &pd.body, &rot);
+    crba_into(model, &pd.body, &rot, m);
     let b = rnea(model, &pd.body, &rot, v, &VecN::zeros(), &model.gravity);
-    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, &mut m, &b)
+    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, m, &b)
 }
 
 /// [`accel`] given the bare-chain mass matrix `m` and bias `b` at (q, v).
@@ -79,7 +89,8 @@ pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
     solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, &mut m, b)
 }
 
-/// [`solve_accel`] that overwrites `m` (with the Cholesky factor of the system matrix).
+/// [`solve_accel`] that overwrites the leading block of `m` (with the Cholesky factor of the
+/// system matrix).
 #[inline]
 #[allow(clippy::too_many_arguments)]
 fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN, b: &VecN) -> VecN {

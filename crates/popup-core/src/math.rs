@@ -88,38 +88,73 @@ pub fn dot_n(a: &VecN, b: &VecN, n: usize) -> f64 {
 /// bit-identical to `SMatrix<f64, n, n>::cholesky().solve()` for n < 9.
 #[inline]
 pub fn cholesky_solve(a: &mut MatN, b: &mut VecN, n: usize) -> bool {
+    // one instance per chain length a model can have (7..=17), so that the loops have
+    // compile-time trip counts (unrolled, no bounds checks) like the old fixed 7×7 solve
+    match n {
+        7 => chol_fixed::<7>(a, b),
+        8 => chol_fixed::<8>(a, b),
+        9 => chol_fixed::<9>(a, b),
+        10 => chol_fixed::<10>(a, b),
+        11 => chol_fixed::<11>(a, b),
+        12 => chol_fixed::<12>(a, b),
+        13 => chol_fixed::<13>(a, b),
+        14 => chol_fixed::<14>(a, b),
+        15 => chol_fixed::<15>(a, b),
+        16 => chol_fixed::<16>(a, b),
+        17 => chol_fixed::<17>(a, b),
+        _ => chol_dyn(a, b, n),
+    }
+}
+
+#[inline(always)]
+fn chol_fixed<const N: usize>(a: &mut MatN, b: &mut VecN) -> bool {
+    chol_dyn(a, b, N)
+}
+
+/// The kernel of [`cholesky_solve`] (column slices of the column-major storage).
+#[inline(always)]
+fn chol_dyn(a: &mut MatN, b: &mut VecN, n: usize) -> bool {
+    assert!(n <= NMAX);
+    // column j is data[j * NMAX .. (j + 1) * NMAX]
+    let data = a.as_mut_slice();
     for j in 0..n {
+        let (left, right) = data.split_at_mut(j * NMAX);
+        let col_j = &mut right[j..n];
         for k in 0..j {
-            let factor = -a[(j, k)];
-            for i in j..n {
-                a[(i, j)] += factor * a[(i, k)];
+            let col_k = &left[k * NMAX + j..k * NMAX + n];
+            let factor = -col_k[0];
+            for (y, &x) in col_j.iter_mut().zip(col_k) {
+                *y += factor * x;
             }
         }
-        let diag = a[(j, j)];
+        let diag = col_j[0];
         if diag.is_nan() || diag <= 0.0 {
             return false;
         }
         let denom = diag.sqrt();
-        a[(j, j)] = denom;
-        for i in j + 1..n {
-            a[(i, j)] /= denom;
+        col_j[0] = denom;
+        for y in &mut col_j[1..] {
+            *y /= denom;
         }
     }
+    let b = &mut b.as_mut_slice()[..n];
     // L y = b
     for i in 0..n {
-        let coeff = b[i] / a[(i, i)];
+        let col_i = &data[i * NMAX + i..i * NMAX + n];
+        let coeff = b[i] / col_i[0];
         b[i] = coeff;
-        for k in i + 1..n {
-            b[k] += -coeff * a[(k, i)];
+        for (y, &l) in b[i + 1..].iter_mut().zip(&col_i[1..]) {
+            *y += -coeff * l;
         }
     }
     // Lᵀ x = y
     for i in (0..n).rev() {
+        let col_i = &data[i * NMAX + i..i * NMAX + n];
         let mut dot = 0.0;
-        for k in i + 1..n {
-            dot += a[(k, i)] * b[k];
+        for (&l, &y) in col_i[1..].iter().zip(&b[i + 1..]) {
+            dot += l * y;
         }
-        b[i] = (b[i] - dot) / a[(i, i)];
+        b[i] = (b[i] - dot) / col_i[0];
     }
     true
 }

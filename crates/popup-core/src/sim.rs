@@ -4,7 +4,7 @@
 use crate::drive::Drive;
 use crate::error::{Error, Result};
 use crate::forward::prescribe;
-use crate::integrate::step;
+use crate::integrate::{step_with, Workspace};
 use crate::math::VecN;
 use crate::model::{Integrator, Model};
 use crate::params::ParamData;
@@ -256,9 +256,10 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
     };
     write(0, &st, &mut data);
     track(&st, &mut alarms);
+    let mut ws = Workspace::new();
     for k in 0..nstep {
         let t = t0 + k as f64 * dt;
-        step(model, pd, &cfg.drive, t, dt, &mut st.q, &mut st.v);
+        step_with(model, pd, &cfg.drive, t, dt, &mut st.q, &mut st.v, &mut ws);
         st.t = t0 + (k + 1) as f64 * dt;
         if let Some(e) = diverged(model, k, t, &st.q, &st.v) {
             return Err(e);
