@@ -158,7 +158,7 @@ impl PyModel {
         Ok(d)
     }
 
-    /// Joint coordinates (7,) at rest: motors at `q_motor`, bending joints in static
+    /// Joint coordinates (nv,) (7 for the arm file's chain) at rest: motors at `q_motor`, bending joints in static
     /// equilibrium.
     fn rest_state<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q_motor: [f64; 3]) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let pd = self.pd(payload_kg, pressure_pa)?;
@@ -166,14 +166,14 @@ impl PyModel {
         Ok(PyArray1::from_slice(py, &st.q.as_slice()[..self.m.nv]))
     }
 
-    /// Locked-motor natural frequencies of the bending joints about q (7,) [rad/s].
+    /// Locked-motor natural frequencies of the passive joints about q (nv,) [rad/s].
     fn locked_modes<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let pd = self.pd(payload_kg, pressure_pa)?;
         let q = vecn(py, &self.m, "q", &q)?;
         Ok(PyArray1::from_slice(py, &statics::locked_modes(&self.m, &pd, &q)))
     }
 
-    /// Mass matrix (7, 7) with armature [kg·m²].
+    /// Mass matrix (nv, nv) with armature [kg·m²].
     fn mass_matrix<'py>(&self, py: Python<'py>, payload_kg: f64, q: Vec<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let pd = self.pd_default_pressure(payload_kg)?;
         let m = statics::mass_matrix(&self.m, &pd, &vecn(py, &self.m, "q", &q)?);
@@ -181,14 +181,14 @@ impl PyModel {
         Ok(Array2::from_shape_fn((nv, nv), |(i, j)| m[(i, j)]).into_pyarray(py))
     }
 
-    /// Generalised gravity forces G(q) (7,) [N·m].
+    /// Generalised gravity forces G(q) (nv,) [N·m].
     fn gravity_torque<'py>(&self, py: Python<'py>, payload_kg: f64, q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let pd = self.pd_default_pressure(payload_kg)?;
         let g = statics::gravity_torque(&self.m, &pd, &vecn(py, &self.m, "q", &q)?);
         Ok(PyArray1::from_slice(py, &g.as_slice()[..self.m.nv]))
     }
 
-    /// Homogeneous transforms T_W_i of frames 0..7, shape (8, 4, 4).
+    /// Homogeneous transforms T_W_i of frames 0..nv, shape (nv + 1, 4, 4).
     fn frames<'py>(&self, py: Python<'py>, q: Vec<f64>) -> PyResult<Bound<'py, PyArray3<f64>>> {
         let f = frames(&self.m, &vecn(py, &self.m, "q", &q)?);
         let nv = self.m.nv;
@@ -222,7 +222,7 @@ impl PyModel {
     ///
     /// payload_kg (B,), pressure_pa (B, 2); drive "torque" or "replay"; times (N,) shared
     /// by all jobs; values (B, N, 3): torques [N·m] or encoder angles [rad];
-    /// initial_q/initial_v (B, 7) or None (rest state); t0 start time for torque runs;
+    /// initial_q/initial_v (B, nv) or None (rest state); t0 start time for torque runs;
     /// duration [s] (None for replay = span of `times`); sample_period [s].
     /// Returns (data (B, S, NCH), errors [None | (class, message)], alarms
     /// [[(link, t_start, t_end, peak_ratio)]], warnings [[str]]). Failed rows are NaN.
