@@ -124,9 +124,13 @@ _SEEDS: Dict[str, List[Dict[str, float]]] = {
     "torsion": [{"k_t": 30.0, "c_t": 0.1}, {"k_t": 300.0, "c_t": 0.5}],
 }
 
+#: Effects whose fit needs more iterations than ``max_iter`` (coupled, lightly damped modes).
+_MIN_ITER: Dict[str, int] = {"torsion": 40, "higher_bending_modes": 25, "wrinkling": 20}
+
 #: Structural settings used when an effect is tried (its discrete parameters).
 _STRUCTURE: Dict[str, Dict[str, Any]] = {
     "higher_bending_modes": {"segments": [2.0, 2.0]},
+    "torsion": {"k_t": [200.0, 200.0]},
 }
 
 
@@ -875,7 +879,7 @@ def _try_effect(
             flat = m.effects_flat
         free = _free_params(name)
         x0 = _best_seed(p, name, free, flat, _x0(p, free, flat))
-        x, flat_fit, r, J = _fit(p, flat, free, x0, max_iter)
+        x, flat_fit, r, J = _fit(p, flat, free, x0, max(max_iter, _MIN_ITER.get(name, 0)))
     except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
         return Suspect(name, False, -math.inf, {}, {}, e0, e0, {}, ev, message=f"{type(e).__name__}: {e}")
     e1, per1 = p.error(r)
@@ -948,7 +952,7 @@ def _refit(model: "Model", run: MeasuredRun, added: List[str], channels: Sequenc
     flat = model.effects_flat
     free = [pi for e in added for pi in _free_params(e)]
     x0 = np.array([flat[p.offset + i] for p, i in free])
-    x, flat_fit, r, _ = _fit(prob, flat, free, x0, max_iter)
+    x, flat_fit, r, _ = _fit(prob, flat, free, x0, max([max_iter] + [_MIN_ITER.get(e, 0) for e in added]))
     new = model.with_effects({e: _params_dict(e, flat_fit) for e in added})
     err, per = prob.error(r)
     return new, err, per

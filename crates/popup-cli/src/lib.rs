@@ -172,7 +172,7 @@ fn go(cli: Cli) -> popup_core::Result<()> {
             let g = gravity_torque(&model, &pd, &st.q);
             let hold = model.motor_idx.map(|i| g[i]);
             st.v = VecN::zeros();
-            st.v[model.bend_idx[3]] = kick;
+            st.v[model.root_bend_idx[3]] = kick;
             let cfg = RunConfig {
                 drive: Drive::Torque(Linear3::new(&[0.0], &[hold])?),
                 initial: Some(st),

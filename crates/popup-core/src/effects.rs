@@ -29,7 +29,7 @@
 //! - `higher_bending_modes`, `torsion`: extra joints (see `docs/effects.md`).
 
 use crate::error::{Error, Result};
-use crate::math::{Vec3, VecN, NV};
+use crate::math::{Mat3, Vec3, VecN, NMAX};
 use crate::model::Model;
 use serde::{Deserialize, Serialize};
 
@@ -419,29 +419,19 @@ impl Effects {
         EFFECT_NAMES.iter().copied().filter(|n| !self.is_neutral(n)).collect()
     }
 
-    /// Structural parameters must match the compiled model.
+    /// Structural parameters are the compiled model's (segments, whether a torsion joint
+    /// exists); a rollout's `segments` are ignored and its `k_t` matters only where the
+    /// model has a torsion joint.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] when a rollout asks for another joint structure than
-    /// the model was compiled with.
+    /// [`Error::InvalidParameter`] for an infinite `k_t` on a link with a torsion joint.
     pub fn check_structure(&self, model: &Model) -> Result<()> {
-        let base = &model.spec.effects;
         for l in 0..2 {
-            if self.higher_bending_modes.segments[l] != base.higher_bending_modes.segments[l] {
-                return Err(Error::param(
-                    format!("effects.higher_bending_modes.segments[{l}]"),
-                    self.higher_bending_modes.segments[l],
-                    format!(
-                        "is structural: the model was compiled with {} segment(s); compile another model (Model.with_effect) to change it",
-                        base.higher_bending_modes.segments[l]
-                    ),
-                ));
-            }
-            if self.torsion.k_t[l].is_finite() != base.torsion.k_t[l].is_finite() {
+            if model.torsion_idx[l].is_some() && !self.torsion.k_t[l].is_finite() {
                 return Err(Error::param(
                     format!("effects.torsion.k_t[{l}]"),
                     self.torsion.k_t[l],
-                    "switches the torsion joint on or off, which is structural: compile another model (Model.with_effect)",
+                    format!("must be finite: the model has a torsion joint for link {} (structural); give its torsional stiffness", l + 1),
                 ));
             }
         }
@@ -479,10 +469,12 @@ pub struct DragPoint {
 }
 
 /// Maximum number of drag points.
-pub const MAX_DRAG: usize = 3 * 2 * NV;
+pub const MAX_DRAG: usize = 3 * 2 * NMAX;
 
 /// Drag quadrature points of the link tubes: 3-point Gauss–Legendre along each tube piece
-/// (tubes lie along their body's local x axis).
+/// of the arm file (tubes lie along their body's local x axis). With a multi-segment link
+/// the points stay on the segment that carries the piece's frame (an approximation: the
+/// drag of the outer segments is applied as if they moved with the first).
 pub fn drag_points(model: &Model) -> ([DragPoint; MAX_DRAG], usize) {
     let mut out = [DragPoint { body: 0, p_b: Vec3::zeros(), area: 0.0 }; MAX_DRAG];
     let mut n = 0;
@@ -500,7 +492,7 @@ pub fn drag_points(model: &Model) -> ([DragPoint; MAX_DRAG], usize) {
             let c = Vec3::from(ps.com_m);
             for g in 0..3 {
                 if n < MAX_DRAG {
-                    out[n] = DragPoint { body: i, p_b: c + Vec3::x() * (0.5 * ps.length_m * xi[g]), area: 2.0 * r * ps.length_m * w[g] };
+                    out[n] = DragPoint { body: model.spec_body[i], p_b: c + Vec3::x() * (0.5 * ps.length_m * xi[g]), area: 2.0 * r * ps.length_m * w[g] };
                     n += 1;
                 }
             }
@@ -510,10 +502,10 @@ pub fn drag_points(model: &Model) -> ([DragPoint; MAX_DRAG], usize) {
 }
 
 /// Generalised air-drag forces [N·m] at (q, q̇) for drag coefficient `cd`.
-pub fn drag_forces(model: &Model, pts: &[DragPoint], cd: f64, rot: &[crate::math::Mat3; NV], v: &VecN) -> VecN {
+pub fn drag_forces(model: &Model, pts: &[DragPoint], cd: f64, rot: &[Mat3; NMAX], v: &VecN) -> VecN {
     let f = crate::kinematics::prbm::frames_with(model, rot);
-    let mut axis = [Vec3::zeros(); NV];
-    for j in 0..NV {
+    let mut axis = [Vec3::zeros(); NMAX];
+    for j in 0..model.nv {
         axis[j] = f.r_wb[j + 1] * model.joints[j].u;
     }
     let mut tau = VecN::zeros();

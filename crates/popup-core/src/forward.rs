@@ -1,20 +1,21 @@
 //! Forward dynamics of the arm with its drive: q̈ = f(t, q, q̇).
 //!
 //! `(M(q) + diag(armature) + h·C_free) q̈ = τ_drive + τ_passive − b(q, q̇)`, where `b` is the
-//! RNEA bias (Coriolis, centrifugal, gravity), `τ_passive = −k δ − c δ̇` on bending joints
-//! and `h` is the implicit-damping step of the semi-implicit integrator (0 for RK4). In
-//! replay the motor rows are replaced by the prescribed accelerations, so the same
-//! Cholesky solve gives the bending accelerations with the motors following the encoders.
+//! RNEA bias (Coriolis, centrifugal, gravity), `τ_passive = −k δ − c δ̇` on the passive
+//! (bending and torsion) joints and `h` is the implicit-damping step of the semi-implicit
+//! integrator (0 for RK4). In replay the motor rows are replaced by the prescribed
+//! accelerations, so the same Cholesky solve gives the passive-joint accelerations with the
+//! motors following the encoders. Everything works on the leading `nv` block.
 
 use crate::drive::Drive;
-use crate::dynamics::{crba, rnea};
-use crate::math::{MatN, VecN, NV};
+use crate::dynamics::{crba_into, rnea};
+use crate::math::{cholesky_solve, MatN, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
 
-/// Passive joint forces `−k δ − c δ̇` on the bending joints at time `t` [N·m]
-/// (respecting `disable`; with `pressure_leak` k, c follow p(t); with `wrinkling` the
-/// springs are bilinear, see [`crate::effects`]).
+/// Passive joint forces `−k δ − c δ̇` on the bending and torsion joints at time `t` [N·m]
+/// (respecting `disable`; with `pressure_leak` the bending k, c follow p(t); with
+/// `wrinkling` the bending springs are bilinear, see [`crate::effects`]).
 #[inline]
 pub fn passive(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> VecN {
     let d = &model.options.disable;
@@ -22,21 +23,21 @@ pub fn passive(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> Vec
     let leak = fx.pressure_leak.rate != [0.0; 2];
     let wrinkle = fx.wrinkling.ratio != 1.0 && !d.spring;
     let mut t_out = VecN::zeros();
-    if !leak && !wrinkle {
-        for &b in &model.bend_idx {
-            let mut f = 0.0;
-            if !d.spring {
-                f -= pd.k[b] * q[b];
-            }
-            if !d.damper {
-                f -= pd.c[b] * v[b];
-            }
-            t_out[b] = f;
+    for &b in model.passive() {
+        let mut f = 0.0;
+        if !d.spring {
+            f -= pd.k[b] * q[b];
         }
+        if !d.damper {
+            f -= pd.c[b] * v[b];
+        }
+        t_out[b] = f;
+    }
+    if !leak && !wrinkle {
         return t_out;
     }
     let s = spring_moments(model, pd, t, q);
-    for &b in &model.bend_idx {
+    for &b in model.bend() {
         let mut f = -s[b];
         if !d.damper {
             f -= pd.kc_at(model, b, t).1 * v[b];
@@ -46,8 +47,8 @@ pub fn passive(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> Vec
     t_out
 }
 
-/// Spring moments of the bending joints at time `t` (with `pressure_leak` and `wrinkling`)
-/// [N·m]; zero with springs disabled.
+/// Spring moments of the bending joints at time `t` (with `pressure_leak` and `wrinkling`,
+/// per universal joint) [N·m]; zero with springs disabled.
 #[inline]
 pub fn spring_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN) -> VecN {
     let mut s = VecN::zeros();
@@ -55,7 +56,7 @@ pub fn spring_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN) -> VecN {
         return s;
     }
     let w = &pd.params.effects.wrinkling;
-    for pair in model.bend_idx.chunks(2) {
+    for pair in model.bend().chunks(2) {
         let (b1, b2) = (pair[0], pair[1]);
         let (k1, _) = pd.kc_at(model, b1, t);
         let (k2, _) = pd.kc_at(model, b2, t);
@@ -72,12 +73,12 @@ pub fn spring_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN) -> VecN {
     s
 }
 
-/// Damping coefficients on the free (bending) joints, for implicit damping.
+/// Damping coefficients on the passive (bending and torsion) joints, for implicit damping.
 #[inline]
 pub fn damping_diag(model: &Model, pd: &ParamData) -> VecN {
     let mut c = VecN::zeros();
     if !model.options.disable.damper {
-        for &b in &model.bend_idx {
+        for &b in model.passive() {
             c[b] = pd.c[b];
         }
     }
@@ -104,11 +105,21 @@ pub fn prescribe(model: &Model, drive: &Drive, t: f64, q: &mut VecN, v: &mut Vec
 /// Joint accelerations at time `t` [rad/s²]. `q`, `v` must already be prescribed for
 /// replay (see [`prescribe`]); `h_implicit` is 0 for explicit evaluation.
 #[inline]
+#[allow(clippy::too_many_arguments)]
 pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64) -> VecN {
+    accel_with(model, pd, drive, t, q, v, am, h_implicit, &mut MatN::zeros())
+}
+
+/// [`accel`] with a scratch matrix `m` that is zero outside the leading nv × nv block (and
+/// is left so): the integrators keep one per run instead of clearing a 17 × 17 matrix at
+/// every evaluation.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn accel_with(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN) -> VecN {
     let rot = model.rotations(q);
-    let m = crba(model, &pd.body, &rot);
+    crba_into(model, &pd.body, &rot, m);
     let b = rnea(model, &pd.body, &rot, v, &VecN::zeros(), &model.gravity);
-    solve_accel(model, pd, drive, t, q, v, am, h_implicit, &m, &b)
+    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, m, &b)
 }
 
 /// [`accel`] given the bare-chain mass matrix `m` and bias `b` at (q, v).
@@ -116,18 +127,27 @@ pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: 
 #[allow(clippy::too_many_arguments)]
 pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &MatN, b: &VecN) -> VecN {
     let mut m: MatN = *m;
+    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, &mut m, b)
+}
+
+/// [`solve_accel`] that overwrites the leading block of `m` (with the Cholesky factor of the
+/// system matrix).
+#[inline]
+#[allow(clippy::too_many_arguments)]
+fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN, b: &VecN) -> VecN {
+    let n = model.nv;
     let mut rhs = passive(model, pd, t, q, v) - b;
     let fx = &pd.params.effects;
     if fx.air_drag.cd > 0.0 {
         let rot = model.rotations(q);
         rhs += crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, &rot, v);
     }
-    for i in 0..NV {
+    for i in 0..n {
         m[(i, i)] += model.armature[i];
     }
     if h_implicit > 0.0 {
         let c = damping_diag(model, pd);
-        for i in 0..NV {
+        for i in 0..n {
             m[(i, i)] += h_implicit * c[i];
         }
     }
@@ -145,12 +165,12 @@ pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
         }
         (Drive::Replay(_), Some(am)) => {
             for (k, &p) in model.motor_idx.iter().enumerate() {
-                for f in 0..NV {
+                for f in 0..n {
                     rhs[f] -= m[(f, p)] * am[k];
                 }
             }
             for (k, &p) in model.motor_idx.iter().enumerate() {
-                for f in 0..NV {
+                for f in 0..n {
                     m[(f, p)] = 0.0;
                     m[(p, f)] = 0.0;
                 }
@@ -160,8 +180,10 @@ pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
         }
         (Drive::Replay(_), None) => unreachable!("replay accelerations must be prescribed"),
     }
-    match m.cholesky() {
-        Some(ch) => ch.solve(&rhs),
-        None => VecN::from_element(f64::NAN),
+    if !cholesky_solve(m, &mut rhs, n) {
+        for i in 0..n {
+            rhs[i] = f64::NAN;
+        }
     }
+    rhs
 }

@@ -1,7 +1,8 @@
 //! # popup-core
 //!
 //! Deterministic simulation core for inflatable robot arms: the 7-DOF pseudo-rigid-body
-//! (PRBM) chain of the POP-UP arm, its rigid 3-DOF kinematics, sensors and batched
+//! (PRBM) chain of the POP-UP arm (expandable at compile time to up to 17 joints: several
+//! segments per link, torsion joints), its rigid 3-DOF kinematics, sensors and batched
 //! rollouts. Pure Rust, no Python, no I/O.
 //!
 //! Structure: [`spec::ArmSpec`] (editable, TOML) → [`model::Model`] (compiled, immutable)

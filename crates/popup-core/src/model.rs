@@ -5,7 +5,7 @@
 //! [`crate::params::Params`].
 
 use crate::error::{Error, Result};
-use crate::math::{rot_zx, skew, Mat3, Vec3, NB, NM, NV};
+use crate::math::{rot_x, rot_zx, skew, Mat3, Vec3, VecN, NBMAX, NM, NMAX, NPMAX, NSEG_MAX, NV_SPEC};
 use crate::spec::arm::{ArmSpec, JointKind, PartShape};
 
 /// Switches that turn force terms off (MuJoCo-style disable flags). Effects of the
@@ -14,9 +14,9 @@ use crate::spec::arm::{ArmSpec, JointKind, PartShape};
 pub struct Disable {
     /// Gravity off.
     pub gravity: bool,
-    /// Bending springs off.
+    /// Springs of the passive joints (bending and torsion) off.
     pub spring: bool,
-    /// Bending dampers off.
+    /// Dampers of the passive joints (bending and torsion) off.
     pub damper: bool,
 }
 
@@ -62,6 +62,37 @@ impl Integrator {
     }
 }
 
+/// Which joints the compiled chain has, beyond the arm file's 7 (physical effects
+/// `higher_bending_modes` and `torsion` of `effects.md`). Chosen at compile time: it sets
+/// the model's `nv`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Structure {
+    /// Segments per link, 1, 2 or 3 (`higher_bending_modes`): the link's outer part (the
+    /// body after its universal joint) is split into this many equal pieces, each starting
+    /// with its own universal joint (two bending joints). Default 1 (the arm file's chain).
+    pub segments: [usize; 2],
+    /// A torsion joint per link (`torsion`): a revolute joint about the link's own long axis
+    /// at the link root, just before its (first) universal joint. Default off.
+    pub torsion: [bool; 2],
+}
+
+impl Default for Structure {
+    fn default() -> Self {
+        Structure { segments: [1, 1], torsion: [false, false] }
+    }
+}
+
+impl Structure {
+    /// True for the arm file's own chain (one segment per link, no torsion).
+    pub fn is_nominal(&self) -> bool {
+        *self == Structure::default()
+    }
+    /// Number of joints of the compiled chain: 3 motors + Σ_l (2 S_l + torsion_l).
+    pub fn nv(&self) -> usize {
+        NM + (0..2).map(|l| 2 * self.segments[l] + usize::from(self.torsion[l])).sum::<usize>()
+    }
+}
+
 /// Simulation options.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Options {
@@ -73,11 +104,13 @@ pub struct Options {
     pub gravity: Option<[f64; 3]>,
     /// Disabled force terms.
     pub disable: Disable,
+    /// Extra joints (segments, torsion). Default: the arm file's 7-joint chain.
+    pub structure: Structure,
 }
 
 impl Default for Options {
     fn default() -> Self {
-        Options { dt: 1e-3, integrator: Integrator::Rk4, gravity: None, disable: Disable::default() }
+        Options { dt: 1e-3, integrator: Integrator::Rk4, gravity: None, disable: Disable::default(), structure: Structure::default() }
     }
 }
 
@@ -115,14 +148,26 @@ impl Rbi {
     }
 }
 
+/// How a joint's rotation depends on its coordinate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JointLaw {
+    /// Standard DH row: `R_{i-1,i} = Rot_z(θ + offset) Rot_x(α)`, axis z_{i-1}.
+    Dh,
+    /// Revolute joint about the x axis of frame i−1: `R_{i-1,i} = Rot_x(θ)`, frames i−1 and
+    /// i coincide at θ = 0 (the torsion joints, about the link's long axis).
+    AboutX,
+}
+
 /// Compiled joint.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JointModel {
-    /// Name (`q1`, `d11`, ...).
+    /// Name (`q1`, `d11`, `d11_2` (segment 2), `t1` (torsion of link 1), ...).
     pub name: String,
-    /// Motor or bending.
+    /// Motor, bending or torsion.
     pub kind: JointKind,
-    /// Joint axis in body-i axes: (0, sin α, cos α).
+    /// Rotation law (DH row, or about x for torsion joints).
+    pub law: JointLaw,
+    /// Joint axis in body-i axes: (0, sin α, cos α) for DH rows, (1, 0, 0) for `AboutX`.
     pub u: Vec3,
     /// Vector from origin i-1 to origin i in body-i axes: (a, d sin α, d cos α) [m].
     pub r: Vec3,
@@ -130,42 +175,105 @@ pub struct JointModel {
     pub ca: f64,
     /// sin α.
     pub sa: f64,
+    /// DH α [rad].
+    pub alpha: f64,
     /// DH a [m].
     pub a: f64,
     /// DH d [m].
     pub d: f64,
     /// θ offset [rad].
     pub theta_offset: f64,
-    /// Link index (0 or 1) for bending joints.
+    /// Link index (0 or 1) for bending and torsion joints.
     pub link: usize,
+    /// Segment of the link (1-based) for bending joints, 0 otherwise.
+    pub segment: usize,
+    /// For bending joints: 0 for the first axis of the universal joint (d·1), 1 for the
+    /// second (d·2).
+    pub axis: usize,
 }
 
 impl JointModel {
+    /// A DH row.
+    #[allow(clippy::too_many_arguments)]
+    fn dh(name: String, kind: JointKind, d: f64, a: f64, alpha: f64, theta_offset: f64, link: usize) -> JointModel {
+        let (sa, ca) = alpha.sin_cos();
+        JointModel {
+            name,
+            kind,
+            law: JointLaw::Dh,
+            u: Vec3::new(0.0, sa, ca),
+            r: Vec3::new(a, d * sa, d * ca),
+            ca,
+            sa,
+            alpha,
+            a,
+            d,
+            theta_offset,
+            link,
+            segment: 0,
+            axis: 0,
+        }
+    }
+
     /// Rotation from body-i axes to body-(i-1) axes at joint coordinate `q` [rad].
     #[inline]
     pub fn rot(&self, q: f64) -> Mat3 {
         let (st, ct) = (q + self.theta_offset).sin_cos();
-        rot_zx(ct, st, self.ca, self.sa)
+        match self.law {
+            JointLaw::Dh => rot_zx(ct, st, self.ca, self.sa),
+            JointLaw::AboutX => rot_x(ct, st),
+        }
     }
 }
 
 /// The compiled arm. Immutable, `Send + Sync`.
+///
+/// The chain has `nv` joints (7 for the arm file's chain; up to [`NMAX`] with segments and
+/// torsion joints, see [`Structure`]). Per-joint arrays have capacity [`NMAX`]; entries
+/// `>= nv` are zero (index lists are padded with `usize::MAX`).
 #[derive(Debug, Clone)]
 pub struct Model {
     /// The spec it was compiled from (for saving and reports).
     pub spec: ArmSpec,
     /// Options.
     pub options: Options,
-    /// Joints, base to tip.
-    pub joints: [JointModel; NV],
-    /// Body inertias about their frame origins without payload.
-    pub body: [Rbi; NV],
+    /// Number of joints of the chain.
+    pub nv: usize,
+    /// Joints, base to tip (length `nv`).
+    pub joints: Vec<JointModel>,
+    /// Body inertias about their frame origins without payload (body i is rigid with
+    /// frame i+1, moved by joint i).
+    pub body: [Rbi; NMAX],
     /// Indices of the motor joints in the chain.
     pub motor_idx: [usize; NM],
-    /// Indices of the bending joints in the chain.
-    pub bend_idx: [usize; NB],
-    /// Armature per chain joint (zero on bending joints) [kg·m²].
-    pub armature: [f64; NV],
+    /// Indices of all bending joints in chain order (the first `nbend` entries).
+    pub bend_idx: [usize; NBMAX],
+    /// Number of bending joints, 2 Σ_l S_l.
+    pub nbend: usize,
+    /// Torsion joint of each link, if any.
+    pub torsion_idx: [Option<usize>; 2],
+    /// Indices of all passive joints (bending and torsion: the joints with a spring and a
+    /// damper) in chain order (the first `npassive` entries).
+    pub passive_idx: [usize; NPMAX],
+    /// Number of passive joints.
+    pub npassive: usize,
+    /// The universal joint at the root of each link (first segment): `[d11, d12, d21, d22]`.
+    /// Their moments are the `m11..m22` channels (where wrinkling starts).
+    pub root_bend_idx: [usize; 4],
+    /// Per channel `d11, d12, d21, d22` (link l, axis a at index 2l + a): the bending joint
+    /// of that axis in each segment, root first (the first `segments[l]` entries).
+    pub segment_bend_idx: [[usize; NSEG_MAX]; 4],
+    /// Segments per link.
+    pub segments: [usize; 2],
+    /// Stiffness factor of each segment joint relative to the one-joint PRBM,
+    /// `Σ_{i=0}^{S-1} (1 − i/S)²` (1 for S = 1): with it the static tip deflection under a
+    /// tip force equals that of the one-joint link.
+    pub seg_factor: [f64; 2],
+    /// Model body (0-based) of each body of the arm file (0-based). A link's outer body maps
+    /// to its last segment, whose frame is the original one.
+    pub spec_body: [usize; NV_SPEC],
+    /// Armature per chain joint (zero on passive joints) [kg·m²].
+    pub armature: [f64; NMAX],
     /// Payload body (0-based) and centre of mass in that body's frame [m].
     pub payload_body: usize,
     /// Payload centre in the payload body's frame [m].
@@ -208,19 +316,113 @@ fn positive(what: &str, v: f64) -> Result<f64> {
     }
 }
 
+/// A validated mass part in its body's frame.
+#[derive(Debug, Clone, Copy)]
+struct Part {
+    m: f64,
+    c: Vec3,
+    /// Extra central inertia given in the arm file.
+    extra: Mat3,
+    /// (length, radius) of a thin-walled tube along local x.
+    tube: Option<(f64, f64)>,
+}
+
+/// Central inertia of a thin-walled tube of mass `m`, radius `r`, length `l` along x.
+#[inline]
+fn tube_inertia(m: f64, r: f64, l: f64) -> Mat3 {
+    Mat3::from_diagonal(&Vec3::new(m * r * r, m * (r * r / 2.0 + l * l / 12.0), m * (r * r / 2.0 + l * l / 12.0)))
+}
+
+impl Part {
+    /// Inertia about the body origin.
+    fn rbi(&self) -> Rbi {
+        let mut ic = self.extra;
+        if let Some((l, r)) = self.tube {
+            ic += tube_inertia(self.m, r, l);
+        }
+        Rbi::from_com(self.m, self.c, ic)
+    }
+}
+
+/// Split the parts of a link's outer body (frame O at the link tip, the universal joint at
+/// x = −len on O's x axis) into `s` segments of length len/s. Segment k (0-based) covers
+/// x ∈ [−len + k len/s, −len + (k+1) len/s] (the first open to −∞, the last to +∞); a tube
+/// part contributes to each segment the piece of it inside (mass and extra inertia in
+/// proportion to length, tube inertia of the piece's own length); points and zero-length
+/// tubes stay on the last segment. Segment k < s−1 has its frame at its outer end with the
+/// axes of the link-root frame P (`r_po` maps O axes to P axes); the last segment's frame is
+/// O itself.
+fn split_outer(parts: &[Part], s: usize, len: f64, r_po: &Mat3) -> [Rbi; NSEG_MAX] {
+    let mut out = [Rbi::ZERO; NSEG_MAX];
+    let seg = len / s as f64;
+    for p in parts {
+        let (l, r) = match p.tube {
+            Some((l, r)) if l > 0.0 => (l, r),
+            _ => {
+                out[s - 1] = out[s - 1].add(&p.rbi());
+                continue;
+            }
+        };
+        let (x0, x1) = (p.c.x - l / 2.0, p.c.x + l / 2.0);
+        for (k, seg_body) in out.iter_mut().enumerate().take(s) {
+            let lo = if k == 0 { f64::NEG_INFINITY } else { -len + k as f64 * seg };
+            let hi = if k + 1 == s { f64::INFINITY } else { -len + (k + 1) as f64 * seg };
+            let (a, b) = (x0.max(lo), x1.min(hi));
+            if b <= a {
+                continue;
+            }
+            let lk = b - a;
+            let mk = p.m * lk / l;
+            let ck = Vec3::new(0.5 * (a + b), p.c.y, p.c.z);
+            let ick = p.extra * (lk / l) + tube_inertia(mk, r, lk);
+            let piece = if k + 1 == s {
+                Rbi::from_com(mk, ck, ick)
+            } else {
+                // O axes → P axes, origin moved from the link tip to the segment's outer end
+                let c_p = r_po * ck + Vec3::new(len - (k + 1) as f64 * seg, 0.0, 0.0);
+                Rbi::from_com(mk, c_p, r_po * ick * r_po.transpose())
+            };
+            *seg_body = seg_body.add(&piece);
+        }
+    }
+    out
+}
+
 impl Model {
-    /// Validate `spec` and precompute everything the step needs.
+    /// Validate `spec` and precompute everything the step needs; expand the chain as
+    /// `options.structure` asks (segments, torsion joints).
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] naming the first offending key (non-finite or negative
     /// masses, radii, stiffness, a chain that is not 3 motors + 2 bending joints per link,
-    /// a non-increasing pressure table, a bad time step, ...).
+    /// a non-increasing pressure table, a bad time step, a segment count outside 1..=3, a
+    /// universal joint that cannot be split into segments or given a torsion joint, ...).
     pub fn compile(spec: &ArmSpec, options: Options) -> Result<Model> {
         positive("options.dt", options.dt)?;
-        if spec.joints.len() != NV {
+        // the joint structure: `options.structure` or, when that is the default, the arm
+        // file's structural effects (multi-segment links, torsion joints)
+        let from_effects = Structure {
+            segments: spec.effects.higher_bending_modes.segments.map(|s| if s.is_finite() && s >= 1.0 && s.fract() == 0.0 { s as usize } else { 0 }),
+            torsion: spec.effects.torsion.k_t.map(|k| k.is_finite()),
+        };
+        let structure = if options.structure == Structure::default() { from_effects } else { options.structure };
+        if options.structure != Structure::default() && from_effects != Structure::default() && options.structure != from_effects {
+            return Err(Error::param(
+                "options.structure",
+                format!("{:?}", options.structure),
+                format!("contradicts the arm file's structural effects ({from_effects:?}); give the structure in one place"),
+            ));
+        }
+        for l in 0..2 {
+            let s = structure.segments[l];
+            if !(1..=NSEG_MAX).contains(&s) {
+                return Err(Error::param(format!("options.structure.segments[{l}] (link {})", l + 1), s, "must be 1, 2 or 3"));
+            }
+        }
+        if spec.joints.len() != NV_SPEC {
             return Err(Error::param("joints", spec.joints.len(), "the PRBM chain must have exactly 7 joints"));
         }
-        if spec.bodies.len() != NV {
+        if spec.bodies.len() != NV_SPEC {
             return Err(Error::param("bodies", spec.bodies.len(), "there must be exactly 7 bodies (one per joint)"));
         }
         if spec.links.len() != 2 {
@@ -256,77 +458,69 @@ impl Model {
         }
         let wrinkle_coef = spec.wrinkling_coefficient()?;
         spec.effects.validate()?;
-        for l in 0..2 {
-            if spec.effects.higher_bending_modes.segments[l] != 1.0 || spec.effects.torsion.k_t[l].is_finite() {
-                return Err(Error::param(
-                    format!("effects (link {})", l + 1),
-                    "higher_bending_modes.segments / torsion.k_t",
-                    "extra joints (multi-segment links, torsion) are not available in this build yet",
-                ));
-            }
-        }
         positive("wrinkling.collapse_factor", spec.wrinkling.collapse_factor)?;
 
-        let mut motor_idx = Vec::new();
-        let mut bend_idx = Vec::new();
-        let mut joints = Vec::with_capacity(NV);
-        let mut armature = [0.0; NV];
+        // the arm file's 7 rows
+        let mut motor_spec = Vec::new();
+        let mut bend_spec = Vec::new();
+        let mut base = Vec::with_capacity(NV_SPEC);
+        let mut base_armature = [0.0; NV_SPEC];
         for (i, js) in spec.joints.iter().enumerate() {
             let p = |k: &str| format!("joints[{i}].{k}");
             let d = finite(&p("d"), js.d)?;
             let a = finite(&p("a"), js.a)?;
             let alpha = finite(&p("alpha"), js.alpha)?;
             finite(&p("theta_offset"), js.theta_offset)?;
-            let (sa, ca) = alpha.sin_cos();
             let mut link = 0;
             match js.kind {
                 JointKind::Motor => {
-                    let m = motor_idx.len();
+                    let m = motor_spec.len();
                     if m < NM {
-                        armature[i] = nonneg(&format!("motors.armature_kgm2[{m}]"), spec.motors.armature_kgm2[m])?;
+                        base_armature[i] = nonneg(&format!("motors.armature_kgm2[{m}]"), spec.motors.armature_kgm2[m])?;
                     }
-                    motor_idx.push(i)
+                    motor_spec.push(i)
                 }
                 JointKind::Bending => {
                     if js.link != 1 && js.link != 2 {
                         return Err(Error::param(p("link"), js.link, "a bending joint must name link 1 or 2"));
                     }
                     link = js.link - 1;
-                    bend_idx.push(i)
+                    bend_spec.push(i)
+                }
+                JointKind::Torsion => {
+                    return Err(Error::param(
+                        p("kind"),
+                        "\"torsion\"",
+                        "torsion joints are not written in the arm file: the torsion effect inserts them (Options.structure.torsion)",
+                    ))
                 }
             }
-            joints.push(JointModel {
-                name: js.name.clone(),
-                kind: js.kind,
-                u: Vec3::new(0.0, sa, ca),
-                r: Vec3::new(a, d * sa, d * ca),
-                ca,
-                sa,
-                a,
-                d,
-                theta_offset: js.theta_offset,
-                link,
-            });
+            base.push(JointModel::dh(js.name.clone(), js.kind, d, a, alpha, js.theta_offset, link));
         }
-        if motor_idx.len() != NM || bend_idx.len() != NB {
+        if motor_spec.len() != NM || bend_spec.len() != 4 {
             return Err(Error::param(
                 "joints",
-                format!("{} motor and {} bending joints", motor_idx.len(), bend_idx.len()),
+                format!("{} motor and {} bending joints", motor_spec.len(), bend_spec.len()),
                 "the PRBM chain needs 3 motor and 4 bending joints",
             ));
         }
-        for l in 0..2 {
-            let n = bend_idx.iter().filter(|&&b| joints[b].link == l).count();
-            if n != 2 {
-                return Err(Error::param(format!("joints (link {})", l + 1), n, "each link needs exactly 2 bending joints (a universal joint)"));
+        // the universal joint of each link: (first row, second row) in chain order
+        let mut uj = [(0usize, 0usize); 2];
+        for (l, u) in uj.iter_mut().enumerate() {
+            let rows: Vec<usize> = bend_spec.iter().copied().filter(|&b| base[b].link == l).collect();
+            if rows.len() != 2 {
+                return Err(Error::param(format!("joints (link {})", l + 1), rows.len(), "each link needs exactly 2 bending joints (a universal joint)"));
             }
+            *u = (rows[0], rows[1]);
         }
 
-        let mut body = [Rbi::ZERO; NV];
+        let mut parts: Vec<Vec<Part>> = Vec::with_capacity(NV_SPEC);
+        let mut base_body = [Rbi::ZERO; NV_SPEC];
         for (i, bs) in spec.bodies.iter().enumerate() {
             if bs.link > 2 {
                 return Err(Error::param(format!("bodies[{i}].link"), bs.link, "must be 0, 1 or 2"));
             }
+            let mut list = Vec::with_capacity(bs.parts.len());
             for (k, ps) in bs.parts.iter().enumerate() {
                 let p = |s: &str| format!("bodies[{i}].parts[{k}].{s}");
                 let m = nonneg(&p("mass_kg"), ps.mass_kg)?;
@@ -338,10 +532,11 @@ impl Model {
                 for (a, v) in iv.iter().enumerate() {
                     finite(&format!("{}[{a}]", p("inertia_kgm2")), *v)?;
                 }
-                let mut ic = Mat3::new(iv[0], iv[3], iv[4], iv[3], iv[1], iv[5], iv[4], iv[5], iv[2]);
+                let extra = Mat3::new(iv[0], iv[3], iv[4], iv[3], iv[1], iv[5], iv[4], iv[5], iv[2]);
                 if iv[0] < 0.0 || iv[1] < 0.0 || iv[2] < 0.0 {
                     return Err(Error::param(p("inertia_kgm2"), format!("{iv:?}"), "principal moments must be >= 0"));
                 }
+                let mut tube = None;
                 if ps.shape == PartShape::Tube {
                     let l = nonneg(&p("length_m"), ps.length_m)?;
                     let r = match ps.radius_m {
@@ -349,13 +544,16 @@ impl Model {
                         None if bs.link > 0 => link_radius[bs.link - 1],
                         None => return Err(Error::param(p("radius_m"), "absent", "a tube on a body without a link needs radius_m")),
                     };
-                    ic += Mat3::from_diagonal(&Vec3::new(m * r * r, m * (r * r / 2.0 + l * l / 12.0), m * (r * r / 2.0 + l * l / 12.0)));
+                    tube = Some((l, r));
                 }
-                body[i] = body[i].add(&Rbi::from_com(m, c, ic));
+                let part = Part { m, c, extra, tube };
+                base_body[i] = base_body[i].add(&part.rbi());
+                list.push(part);
             }
+            parts.push(list);
         }
         let sensor = |what: &str, b: usize, pos: [f64; 3]| -> Result<(usize, Vec3)> {
-            if b < 1 || b > NV {
+            if !(1..=NV_SPEC).contains(&b) {
                 return Err(Error::param(format!("{what}.body"), b, "must be a body number 1..7"));
             }
             for v in pos {
@@ -378,33 +576,216 @@ impl Model {
             finite("gravity", v)?;
         }
         let gravity = if options.disable.gravity { Vec3::zeros() } else { Vec3::from(g) };
+
+        // expansion: segments and torsion joints
+        for (l, &(f, s)) in uj.iter().enumerate() {
+            if structure.segments[l] == 1 && !structure.torsion[l] {
+                continue;
+            }
+            let why = format!(
+                "link {} has {} segment(s){}: its universal joint must be two consecutive rows (d = 0, a = 0) and (d = 0, a = L > 0) without θ offsets, the outer part along x",
+                l + 1,
+                structure.segments[l],
+                if structure.torsion[l] { " and a torsion joint" } else { "" }
+            );
+            let bad = |k: &str, i: usize, v: f64| Err(Error::param(format!("joints[{i}].{k}"), v, why.clone()));
+            if s != f + 1 {
+                return Err(Error::param(format!("joints[{s}]"), &base[s].name, why.clone()));
+            }
+            if base[f].d != 0.0 {
+                return bad("d", f, base[f].d);
+            }
+            if base[f].a != 0.0 {
+                return bad("a", f, base[f].a);
+            }
+            if base[f].theta_offset != 0.0 {
+                return bad("theta_offset", f, base[f].theta_offset);
+            }
+            if base[s].d != 0.0 {
+                return bad("d", s, base[s].d);
+            }
+            if base[s].theta_offset != 0.0 {
+                return bad("theta_offset", s, base[s].theta_offset);
+            }
+            if base[s].a <= 0.0 {
+                return bad("a", s, base[s].a);
+            }
+        }
+        let nv = structure.nv();
+        let mut joints: Vec<JointModel> = Vec::with_capacity(nv);
+        let mut body = [Rbi::ZERO; NMAX];
+        let mut armature = [0.0; NMAX];
+        let mut spec_body = [0usize; NV_SPEC];
+        let mut i = 0;
+        while i < NV_SPEC {
+            let link_here = (0..2).find(|&l| uj[l].0 == i);
+            match link_here {
+                Some(l) if structure.segments[l] > 1 || structure.torsion[l] => {
+                    let (ja, jb) = (&base[i], &base[i + 1]);
+                    if structure.torsion[l] {
+                        joints.push(JointModel {
+                            name: format!("t{}", l + 1),
+                            kind: JointKind::Torsion,
+                            law: JointLaw::AboutX,
+                            u: Vec3::new(1.0, 0.0, 0.0),
+                            r: Vec3::zeros(),
+                            ca: 1.0,
+                            sa: 0.0,
+                            alpha: 0.0,
+                            a: 0.0,
+                            d: 0.0,
+                            theta_offset: 0.0,
+                            link: l,
+                            segment: 0,
+                            axis: 0,
+                        });
+                    }
+                    let ns = structure.segments[l];
+                    let len = jb.a;
+                    let pieces = if ns == 1 {
+                        let mut p = [Rbi::ZERO; NSEG_MAX];
+                        p[0] = base_body[i + 1];
+                        p
+                    } else {
+                        split_outer(&parts[i + 1], ns, len, &(ja.rot(0.0) * jb.rot(0.0)))
+                    };
+                    for k in 1..=ns {
+                        let suffix = if k == 1 { String::new() } else { format!("_{k}") };
+                        let mut a = JointModel::dh(format!("{}{suffix}", ja.name), ja.kind, 0.0, 0.0, ja.alpha, 0.0, l);
+                        a.segment = k;
+                        a.axis = 0;
+                        if k == 1 {
+                            body[joints.len()] = base_body[i];
+                            spec_body[i] = joints.len();
+                        }
+                        joints.push(a);
+                        // intermediate segments end in the link-root axes (α = −α_first), the
+                        // last one in the original outer frame
+                        let (seg_a, seg_alpha) = if ns == 1 { (jb.a, jb.alpha) } else if k == ns { (len / ns as f64, jb.alpha) } else { (len / ns as f64, -ja.alpha) };
+                        let mut b = JointModel::dh(format!("{}{suffix}", jb.name), jb.kind, 0.0, seg_a, seg_alpha, 0.0, l);
+                        b.segment = k;
+                        b.axis = 1;
+                        body[joints.len()] = pieces[k - 1];
+                        if k == ns {
+                            spec_body[i + 1] = joints.len();
+                        }
+                        joints.push(b);
+                    }
+                    i += 2;
+                }
+                _ => {
+                    let mut j = base[i].clone();
+                    if j.kind == JointKind::Bending {
+                        j.segment = 1;
+                        j.axis = usize::from(uj[j.link].1 == i);
+                    }
+                    body[joints.len()] = base_body[i];
+                    armature[joints.len()] = base_armature[i];
+                    spec_body[i] = joints.len();
+                    joints.push(j);
+                    i += 1;
+                }
+            }
+        }
+        debug_assert_eq!(joints.len(), nv);
+
+        let mut motor_idx = [usize::MAX; NM];
+        let mut bend_idx = [usize::MAX; NBMAX];
+        let mut passive_idx = [usize::MAX; NPMAX];
+        let mut torsion_idx = [None; 2];
+        let mut root_bend_idx = [usize::MAX; 4];
+        let mut segment_bend_idx = [[usize::MAX; NSEG_MAX]; 4];
+        let (mut nm, mut nbend, mut npassive) = (0, 0, 0);
+        for (i, j) in joints.iter().enumerate() {
+            match j.kind {
+                JointKind::Motor => {
+                    motor_idx[nm] = i;
+                    nm += 1;
+                }
+                JointKind::Bending => {
+                    bend_idx[nbend] = i;
+                    nbend += 1;
+                    passive_idx[npassive] = i;
+                    npassive += 1;
+                    let ch = 2 * j.link + j.axis;
+                    segment_bend_idx[ch][j.segment - 1] = i;
+                    if j.segment == 1 {
+                        root_bend_idx[ch] = i;
+                    }
+                }
+                JointKind::Torsion => {
+                    torsion_idx[j.link] = Some(i);
+                    passive_idx[npassive] = i;
+                    npassive += 1;
+                }
+            }
+        }
+        let seg_factor = structure.segments.map(|s| (0..s).map(|i| (1.0 - i as f64 / s as f64).powi(2)).sum());
         Ok(Model {
             spec: spec.clone(),
             options,
-            joints: joints.try_into().expect("7 joints"),
+            nv,
+            joints,
             body,
-            motor_idx: motor_idx.try_into().expect("3 motors"),
-            bend_idx: bend_idx.try_into().expect("4 bending joints"),
+            motor_idx,
+            bend_idx,
+            nbend,
+            torsion_idx,
+            passive_idx,
+            npassive,
+            root_bend_idx,
+            segment_bend_idx,
+            segments: structure.segments,
+            seg_factor,
+            spec_body,
             armature,
-            payload_body,
+            payload_body: spec_body[payload_body],
             payload_com,
             link_radius,
             link_scale,
             wrinkle_coef,
-            imu,
-            ee,
+            imu: [(spec_body[imu[0].0], imu[0].1), (spec_body[imu[1].0], imu[1].1)],
+            ee: (spec_body[ee.0], ee.1),
             gravity,
         })
     }
 
-    /// Name of chain joint `i` (0-based).
+    /// Name of chain joint `i` (0-based, `i < nv`).
     pub fn joint_name(&self, i: usize) -> &str {
         &self.joints[i].name
     }
 
-    /// Rotation from body-i to body-(i-1) axes for every joint at `q`.
+    /// Names of all chain joints, base to tip (`nv` names).
+    pub fn joint_names(&self) -> Vec<&str> {
+        self.joints.iter().map(|j| j.name.as_str()).collect()
+    }
+
+    /// All bending joints, chain order.
     #[inline]
-    pub fn rotations(&self, q: &crate::math::VecN) -> [Mat3; NV] {
-        std::array::from_fn(|i| self.joints[i].rot(q[i]))
+    pub fn bend(&self) -> &[usize] {
+        &self.bend_idx[..self.nbend]
+    }
+
+    /// All passive joints (bending and torsion), chain order.
+    #[inline]
+    pub fn passive(&self) -> &[usize] {
+        &self.passive_idx[..self.npassive]
+    }
+
+    /// The bending joints of channel `ch` (0..4: d11, d12, d21, d22) in each segment of
+    /// its link, root first.
+    #[inline]
+    pub fn channel_joints(&self, ch: usize) -> &[usize] {
+        &self.segment_bend_idx[ch][..self.segments[ch / 2]]
+    }
+
+    /// Rotation from body-i to body-(i-1) axes for every joint at `q` (identity beyond `nv`).
+    #[inline]
+    pub fn rotations(&self, q: &VecN) -> [Mat3; NMAX] {
+        let mut r = [Mat3::identity(); NMAX];
+        for (i, j) in self.joints.iter().enumerate() {
+            r[i] = j.rot(q[i]);
+        }
+        r
     }
 }

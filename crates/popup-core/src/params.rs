@@ -2,9 +2,9 @@
 //! from them for one model (`ParamData`: joint stiffness, damping, wrinkling moments and
 //! body inertias with the payload).
 
-use crate::effects::{drag_points, DragPoint, Effects, MAX_DRAG};
 use crate::error::{Error, Result};
-use crate::math::{Mat3, Vec3, NV};
+use crate::effects::{drag_points, DragPoint, Effects, MAX_DRAG};
+use crate::math::{Mat3, Vec3, NMAX};
 use crate::model::{Model, Rbi};
 
 /// Parameters of one rollout.
@@ -15,7 +15,9 @@ pub struct Params {
     /// Relative inflation pressure of link 1 and link 2 [Pa], >= 0. k(p), c(p) are
     /// interpolated linearly in the arm's table and clamped (with a warning) outside it.
     pub pressure_pa: [f64; 2],
-    /// Effect parameters (default: the arm file's `[effects]`, usually all neutral).
+    /// Effect parameters (default: the arm file's `[effects]`, usually all neutral). The
+    /// structural ones (segments, whether a torsion joint exists) are the compiled model's;
+    /// `higher_bending_modes.k_scale` and `torsion.k_t`, `c_t` act on the extra joints.
     pub effects: Effects,
 }
 
@@ -35,14 +37,17 @@ impl Params {
 pub struct ParamData {
     /// The parameters.
     pub params: Params,
-    /// Spring stiffness per chain joint (0 on motors) [N·m/rad].
-    pub k: [f64; NV],
-    /// Damping per chain joint (0 on motors) [N·m·s/rad].
-    pub c: [f64; NV],
+    /// Spring stiffness per chain joint (0 on motors and beyond `nv`) [N·m/rad]. Bending
+    /// joints of link l: k(p) · link scale · segment factor · `seg_k_scale[l]`; torsion:
+    /// `k_t[l]`.
+    pub k: [f64; NMAX],
+    /// Damping per chain joint (0 on motors and beyond `nv`) [N·m·s/rad], as `k` with c(p)
+    /// and `c_t`.
+    pub c: [f64; NMAX],
     /// Wrinkling-onset moment per link M_w = coef · p · r³ [N·m].
     pub mw: [f64; 2],
     /// Body inertias about their frame origins, payload included.
-    pub body: [Rbi; NV],
+    pub body: [Rbi; NMAX],
     /// Table values k(p₀), c(p₀) per link before the link scale (for `pressure_leak`).
     pub kc0: [[f64; 2]; 2],
     /// Air-drag quadrature points and their count (filled only with `air_drag` on).
@@ -69,7 +74,9 @@ impl ParamData {
     /// Derive the per-rollout numbers.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] for a NaN/negative payload or pressure.
+    /// [`Error::InvalidParameter`] for a NaN/negative payload or pressure, an effect
+    /// parameter out of its bounds (`effects.<effect>.<param>[i]`), an infinite
+    /// `effects.torsion.k_t` for a link that has a torsion joint, or a negative total payload.
     pub fn new(model: &Model, params: &Params) -> Result<ParamData> {
         if !(params.payload_kg.is_finite() && params.payload_kg >= 0.0) {
             return Err(Error::param("payload_kg", params.payload_kg, "must be finite and >= 0 kg"));
@@ -114,11 +121,20 @@ impl ParamData {
                 mw[l] *= fx.wrinkling.mw_scale;
             }
         }
-        let mut k = [0.0; NV];
-        let mut c = [0.0; NV];
-        for &b in &model.bend_idx {
-            k[b] = kl[model.joints[b].link];
-            c[b] = cl[model.joints[b].link];
+        let mut k = [0.0; NMAX];
+        let mut c = [0.0; NMAX];
+        for &b in model.bend() {
+            let l = model.joints[b].link;
+            // k_scale shapes the segments of a multi-segment link only (neutral for one)
+            let sc = if model.segments[l] > 1 { fx.higher_bending_modes.k_scale[l] } else { 1.0 };
+            k[b] = kl[l] * model.seg_factor[l] * sc;
+            c[b] = cl[l] * model.seg_factor[l] * sc;
+        }
+        for l in 0..2 {
+            if let Some(t) = model.torsion_idx[l] {
+                k[t] = fx.torsion.k_t[l];
+                c[t] = fx.torsion.c_t[l];
+            }
         }
         let mut body = model.body;
         let pb = model.payload_body;
@@ -130,12 +146,12 @@ impl ParamData {
     }
 
     /// Spring and damper coefficients of chain joint `b` at time `t` (with `pressure_leak`,
-    /// k and c follow the table at p(t)) [N·m/rad], [N·m·s/rad].
+    /// a bending joint's k and c follow the table at p(t)) [N·m/rad], [N·m·s/rad].
     #[inline]
     pub fn kc_at(&self, model: &Model, b: usize, t: f64) -> (f64, f64) {
         let l = model.joints[b].link;
         let rate = self.params.effects.pressure_leak.rate[l];
-        if rate == 0.0 {
+        if rate == 0.0 || model.torsion_idx[l] == Some(b) {
             return (self.k[b], self.c[b]);
         }
         let tab = &model.spec.stiffness;

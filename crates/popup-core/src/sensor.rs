@@ -4,12 +4,19 @@
 //! IMUs read specific force `a − g` at their mount in the mount body's axes; the bending
 //! moment of joint j is `k δ_j + c δ̇_j`; `m*_ratio` is |M| of the link's universal joint
 //! (both axes combined) over the wrinkling-onset moment M_w = coef · p · r³.
+//!
+//! With several segments per link (`higher_bending_modes`) the channels keep their meaning
+//! for the link as a whole: `d11` (`d12`) is the sum of the first- (second-) axis angles of
+//! all the link's universal joints (the small-angle tip rotation relative to the root),
+//! `dd*` the sum of their rates, and `m11..m22`, `m*_ratio` are the moments at the link's
+//! ROOT universal joint (first segment), where the bending moment is largest and wrinkling
+//! starts. The torsion joints have no channel of their own; `energy` includes their springs.
 
 use crate::drive::Drive;
 use crate::dynamics::{crba, forward_pass, rnea};
 use crate::forward::{solve_accel, spring_moments};
 use crate::kinematics::prbm::{frames_with, Frames};
-use crate::math::{MatN, Vec3, VecN, NV};
+use crate::math::{dot_n, mat_vec_row, MatN, Vec3, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
 
@@ -35,8 +42,8 @@ pub fn channel_index(name: &str) -> Option<usize> {
     CHANNELS.iter().position(|c| *c == name)
 }
 
-/// Bending moments `k δ + c δ̇` of the four bending joints at time `t` [N·m] and |M|/M_w
-/// per link (with the effects' spring law and M_w(t)).
+/// Bending moments `k δ + c δ̇` of the root universal joints `[d11, d12, d21, d22]` [N·m]
+/// and |M|/M_w per link.
 #[inline]
 pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> ([f64; 4], [f64; 2]) {
     let d = &model.options.disable;
@@ -44,7 +51,7 @@ pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN
     let mut m = [0.0; 4];
     let mut sq = [0.0; 2];
     if fx.pressure_leak.rate == [0.0; 2] && (fx.wrinkling.ratio == 1.0 || d.spring) {
-        for (a, &b) in model.bend_idx.iter().enumerate() {
+        for (a, &b) in model.root_bend_idx.iter().enumerate() {
             let ks = if d.spring { 0.0 } else { pd.k[b] };
             let cs = if d.damper { 0.0 } else { pd.c[b] };
             m[a] = ks * q[b] + cs * v[b];
@@ -54,7 +61,7 @@ pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN
         return (m, ratio);
     }
     let s = spring_moments(model, pd, t, q);
-    for (a, &b) in model.bend_idx.iter().enumerate() {
+    for (a, &b) in model.root_bend_idx.iter().enumerate() {
         let cs = if d.damper { 0.0 } else { pd.kc_at(model, b, t).1 };
         m[a] = s[b] + cs * v[b];
         sq[model.joints[b].link] += m[a] * m[a];
@@ -70,7 +77,8 @@ pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN
     (m, ratio)
 }
 
-/// Total mechanical energy: kinetic (armature included) + gravity + spring [J].
+/// Total mechanical energy: kinetic (armature included) + gravity + springs (every bending
+/// segment and torsion joint) [J].
 pub fn energy(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> f64 {
     let rot = model.rotations(q);
     let m = crba(model, &pd.body, &rot);
@@ -78,12 +86,17 @@ pub fn energy(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> f64 
 }
 
 fn energy_with(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, m: &MatN, f: &Frames) -> f64 {
-    let mut kin = 0.5 * v.dot(&(m * v));
-    for i in 0..NV {
+    let n = model.nv;
+    let mut mv = VecN::zeros();
+    for i in 0..n {
+        mv[i] = mat_vec_row(m, v, i, n);
+    }
+    let mut kin = 0.5 * dot_n(v, &mv, n);
+    for i in 0..n {
         kin += 0.5 * model.armature[i] * v[i] * v[i];
     }
     let mut pot = 0.0;
-    for i in 0..NV {
+    for i in 0..n {
         let b = &pd.body[i];
         let mc_w = f.p_wb[i + 1] * b.m + f.r_wb[i + 1] * b.h;
         pot -= model.gravity.dot(&mc_w);
@@ -91,11 +104,11 @@ fn energy_with(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, m: &Ma
     let fx = &pd.params.effects;
     if model.options.disable.spring {
     } else if fx.pressure_leak.rate == [0.0; 2] && fx.wrinkling.ratio == 1.0 {
-        for &b in &model.bend_idx {
+        for &b in model.passive() {
             pot += 0.5 * pd.k[b] * q[b] * q[b];
         }
     } else {
-        for pair in model.bend_idx.chunks(2) {
+        for pair in model.bend().chunks(2) {
             let (b1, b2) = (pair[0], pair[1]);
             let (k1, k2) = (pd.kc_at(model, b1, t).0, pd.kc_at(model, b2, t).0);
             if fx.wrinkling.ratio != 1.0 && k1 == k2 {
@@ -104,7 +117,13 @@ fn energy_with(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, m: &Ma
                 pot += 0.5 * (k1 * q[b1] * q[b1] + k2 * q[b2] * q[b2]);
             }
         }
+        for &b in model.passive() {
+            if !model.bend().contains(&b) {
+                pot += 0.5 * pd.k[b] * q[b] * q[b];
+            }
+        }
     }
+
     kin + pot
 }
 
@@ -119,17 +138,18 @@ pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v:
     let qdd = solve_accel(model, pd, drive, t, q, v, am, 0.0, &m, &b);
     let bm = forward_pass(model, &rot, v, &qdd, &(-model.gravity));
     let fr = frames_with(model, &rot);
-    let mut tau_all = m * qdd + b;
     let fx = &pd.params.effects;
-    if fx.air_drag.cd > 0.0 {
-        tau_all -= crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, &rot, v);
-    }
+    let drag = if fx.air_drag.cd > 0.0 { Some(crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, &rot, v)) } else { None };
     row[0] = t;
     for k in 0..3 {
         let i = model.motor_idx[k];
         row[1 + k] = q[i];
         row[4 + k] = v[i];
-        let mut tau = tau_all[i];
+        // row i of M q̈ + b (minus external loads), plus the motoreducer's own friction
+        let mut tau = mat_vec_row(&m, &qdd, i, model.nv) + b[i];
+        if let Some(dr) = &drag {
+            tau -= dr[i];
+        }
         if fx.joint_friction.on() {
             tau += crate::effects::friction_torque(&fx.joint_friction, k, v[i]);
         }
@@ -147,9 +167,16 @@ pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v:
     row[19] = pd.pressure_at(0, t);
     row[20] = pd.pressure_at(1, t);
     let (mom, ratio) = bending_moments(model, pd, t, q, v);
-    for (a, &b) in model.bend_idx.iter().enumerate() {
-        row[21 + a] = q[b];
-        row[25 + a] = v[b];
+    for a in 0..4 {
+        // sum over the link's segments, root first (exactly q[root] for one segment)
+        let js = model.channel_joints(a);
+        let (mut d, mut dd) = (q[js[0]], v[js[0]]);
+        for &j in &js[1..] {
+            d += q[j];
+            dd += v[j];
+        }
+        row[21 + a] = d;
+        row[25 + a] = dd;
         row[29 + a] = mom[a];
     }
     row[33] = ratio[0];

@@ -5,8 +5,8 @@ use crate::drive::{Drive, Spline3};
 use crate::effects::{delay_columns, play};
 use crate::error::{Error, Result};
 use crate::forward::prescribe;
-use crate::integrate::step;
-use crate::math::{VecN, NV};
+use crate::integrate::{step_with, Workspace};
+use crate::math::VecN;
 use crate::model::{Integrator, Model};
 use crate::params::ParamData;
 use crate::sensor::{bending_moments, sample, NCH};
@@ -20,9 +20,9 @@ pub const MAX_JOINT_SPEED: f64 = 1e4;
 pub struct State {
     /// Time [s].
     pub t: f64,
-    /// Joint coordinates, chain order [rad].
+    /// Joint coordinates, chain order [rad] (entries `>= nv` are 0).
     pub q: VecN,
-    /// Joint rates [rad/s].
+    /// Joint rates [rad/s] (entries `>= nv` are 0).
     pub v: VecN,
 }
 
@@ -70,8 +70,8 @@ pub struct RunConfig {
     pub check_step: bool,
 }
 
-/// Initial state at rest with the motors at `qm` and the bending joints in static
-/// equilibrium.
+/// Initial state at rest with the motors at `qm` and the passive (bending and torsion)
+/// joints in static equilibrium.
 ///
 /// # Errors
 /// As [`static_equilibrium`].
@@ -85,12 +85,12 @@ pub fn rest_state(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result
 }
 
 /// Check `dt` against the linearised arm about `q` (free joints: all in torque drive,
-/// bending joints in replay).
+/// passive joints in replay).
 ///
 /// # Errors
 /// [`Error::StepTooLarge`] naming the mode, its joint and the largest stable step.
 pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Result<()> {
-    let free: Vec<usize> = if replay { model.bend_idx.to_vec() } else { (0..NV).collect() };
+    let free: Vec<usize> = if replay { model.passive().to_vec() } else { (0..model.nv).collect() };
     let h = model.options.dt;
     let integ = model.options.integrator;
     let eigs = linear_eigs(model, pd, q, &free, integ == Integrator::Rk4);
@@ -145,7 +145,7 @@ pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Resu
 fn diverged(model: &Model, k: usize, t: f64, q: &VecN, v: &VecN) -> Option<Error> {
     let mut worst: Option<(usize, String)> = None;
     let mut vmax = 0.0;
-    for i in 0..NV {
+    for i in 0..model.nv {
         if !q[i].is_finite() || !v[i].is_finite() {
             worst = Some((i, format!("q = {} rad, v = {} rad/s (non-finite)", q[i], v[i])));
             break;
@@ -202,9 +202,17 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
     let cfg = &RunConfig { drive, ..cfg.clone() };
     let mut st = match cfg.initial {
         Some(s) => {
-            for i in 0..NV {
+            for i in 0..model.nv {
                 if !s.q[i].is_finite() || !s.v[i].is_finite() {
                     return Err(Error::input("initial state", format!("joint {} has q = {}, v = {}", model.joint_name(i), s.q[i], s.v[i])));
+                }
+            }
+            for i in model.nv..s.q.len() {
+                if s.q[i] != 0.0 || s.v[i] != 0.0 {
+                    return Err(Error::input(
+                        "initial state",
+                        format!("entry {i} has q = {}, v = {}, but the model has {} joints: entries beyond them must be 0", s.q[i], s.v[i], model.nv),
+                    ));
                 }
             }
             s
@@ -258,9 +266,10 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
     };
     write(0, &st, &mut data);
     track(&st, &mut alarms);
+    let mut ws = Workspace::new();
     for k in 0..nstep {
         let t = t0 + k as f64 * dt;
-        step(model, pd, &cfg.drive, t, dt, &mut st.q, &mut st.v);
+        step_with(model, pd, &cfg.drive, t, dt, &mut st.q, &mut st.v, &mut ws);
         st.t = t0 + (k + 1) as f64 * dt;
         if let Some(e) = diverged(model, k, t, &st.q, &st.v) {
             return Err(e);

@@ -1,13 +1,14 @@
-//! Statics and linearisation: static equilibrium of the bending joints, gravity stiffness,
-//! locked-motor modes and the eigenvalues used by the step-size check.
+//! Statics and linearisation: static equilibrium of the passive (bending and torsion)
+//! joints, gravity stiffness, locked-motor modes and the eigenvalues used by the step-size
+//! check. None of this is on the hot path; matrices over joint subsets are `DMatrix`.
 
 use crate::dynamics::{crba, rnea};
 use crate::error::{Error, Result};
 use crate::forward::damping_diag;
-use crate::math::{MatN, VecN, NB, NV};
+use crate::math::{MatN, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
-use nalgebra::{Complex, DMatrix, SMatrix, SVector};
+use nalgebra::{Complex, DMatrix, DVector};
 
 /// Generalised gravity forces G(q) = ∂V/∂q [N·m].
 pub fn gravity_torque(model: &Model, pd: &ParamData, q: &VecN) -> VecN {
@@ -16,11 +17,11 @@ pub fn gravity_torque(model: &Model, pd: &ParamData, q: &VecN) -> VecN {
 }
 
 /// Joint-space stiffness K = diag(k) + ∂G/∂q at `q` (central differences of G, symmetrised)
-/// [N·m/rad].
+/// [N·m/rad], leading nv × nv block.
 pub fn stiffness(model: &Model, pd: &ParamData, q: &VecN) -> MatN {
     let h = 1e-6;
     let mut k = MatN::zeros();
-    for j in 0..NV {
+    for j in 0..model.nv {
         let mut qp = *q;
         let mut qm = *q;
         qp[j] += h;
@@ -30,45 +31,45 @@ pub fn stiffness(model: &Model, pd: &ParamData, q: &VecN) -> MatN {
     }
     k = (k + k.transpose()) * 0.5;
     if !model.options.disable.spring {
-        for &b in &model.bend_idx {
+        for &b in model.passive() {
             k[(b, b)] += pd.k[b];
         }
     }
     k
 }
 
-/// Mass matrix with armature [kg·m²].
+/// Mass matrix with armature [kg·m²], leading nv × nv block.
 pub fn mass_matrix(model: &Model, pd: &ParamData, q: &VecN) -> MatN {
     let rot = model.rotations(q);
     let mut m = crba(model, &pd.body, &rot);
-    for i in 0..NV {
+    for i in 0..model.nv {
         m[(i, i)] += model.armature[i];
     }
     m
 }
 
-fn sub<const N: usize>(m: &MatN, idx: &[usize; N]) -> SMatrix<f64, N, N> {
-    SMatrix::from_fn(|i, j| m[(idx[i], idx[j])])
+fn sub(m: &MatN, idx: &[usize]) -> DMatrix<f64> {
+    DMatrix::from_fn(idx.len(), idx.len(), |i, j| m[(idx[i], idx[j])])
 }
 
-/// Static equilibrium of the bending joints with the motor joints held at the motor
-/// coordinates of `q`: solves `G_b(q) + k δ = 0` by Newton's method. Returns q with the
-/// bending coordinates at equilibrium (starting from those of `q`).
+/// Static equilibrium of the passive (bending and torsion) joints with the motor joints held
+/// at the motor coordinates of `q`: solves `G_p(q) + k δ = 0` by Newton's method. Returns q
+/// with the passive coordinates at equilibrium (starting from those of `q`).
 ///
 /// # Errors
 /// [`Error::NoConvergence`] if Newton fails (e.g. springs too weak to hold the arm).
 pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<VecN> {
     let mut x = *q;
-    let bi = model.bend_idx;
+    let bi = model.passive();
     for it in 0..50 {
         let g = gravity_torque(model, pd, &x);
-        let mut r = SVector::<f64, NB>::zeros();
+        let mut r = DVector::<f64>::zeros(bi.len());
         let fx = &pd.params.effects;
         let sm = if fx.wrinkling.ratio != 1.0 || fx.pressure_leak.rate != [0.0; 2] { Some(crate::forward::spring_moments(model, pd, 0.0, &x)) } else { None };
         for (a, &b) in bi.iter().enumerate() {
             let spring = if model.options.disable.spring {
                 0.0
-            } else if let Some(s) = &sm {
+            } else if let (Some(s), true) = (&sm, model.bend().contains(&b)) {
                 s[b]
             } else {
                 pd.k[b] * x[b]
@@ -76,24 +77,24 @@ pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<Vec
             r[a] = g[b] + spring;
         }
         let mut kfull = stiffness(model, pd, &x);
-        if sm.is_some() {
+        if sm.is_some() && !model.options.disable.spring {
             // tangent of the effect-modified springs (bilinear, leaking) instead of diag(k)
             let h = 1e-7;
-            for &j in &bi {
+            for &j in model.bend() {
                 kfull[(j, j)] -= pd.k[j];
                 let (mut xp, mut xm) = (x, x);
                 xp[j] += h;
                 xm[j] -= h;
                 let d = (crate::forward::spring_moments(model, pd, 0.0, &xp) - crate::forward::spring_moments(model, pd, 0.0, &xm)) / (2.0 * h);
-                for &i in &bi {
+                for &i in model.bend() {
                     kfull[(i, j)] += d[i];
                 }
             }
         }
-        let kk = sub(&kfull, &bi);
+        let kk = sub(&kfull, bi);
         let dx = kk.lu().solve(&r).ok_or_else(|| Error::NoConvergence {
             what: "static equilibrium".into(),
-            message: "the bending stiffness matrix is singular (springs disabled or zero?)".into(),
+            message: "the passive-joint stiffness matrix is singular (springs disabled or zero?)".into(),
         })?;
         for (a, &b) in bi.iter().enumerate() {
             x[b] -= dx[a];
@@ -108,26 +109,26 @@ pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<Vec
     Err(Error::NoConvergence {
         what: "static equilibrium".into(),
         message: format!(
-            "Newton iteration on the bending joints did not converge (payload {} kg, pressures {:?} Pa): the springs may be too weak for the load",
+            "Newton iteration on the passive joints did not converge (payload {} kg, pressures {:?} Pa): the springs may be too weak for the load",
             pd.params.payload_kg, pd.params.pressure_pa
         ),
     })
 }
 
-/// Undamped natural frequencies of the bending joints with the motors locked, about `q`
-/// (spring plus gravity stiffness), ascending [rad/s]. A negative entry means a statically
-/// unstable direction (−√|λ|).
-pub fn locked_modes(model: &Model, pd: &ParamData, q: &VecN) -> [f64; NB] {
-    let bi = model.bend_idx;
-    let m = sub(&mass_matrix(model, pd, q), &bi);
-    let k = sub(&stiffness(model, pd, q), &bi);
-    let l = m.cholesky().expect("bending mass matrix is positive definite").l();
+/// Undamped natural frequencies of the passive (bending and torsion) joints with the motors
+/// locked, about `q` (spring plus gravity stiffness), ascending [rad/s], one per passive
+/// joint. A negative entry means a statically unstable direction (−√|λ|).
+pub fn locked_modes(model: &Model, pd: &ParamData, q: &VecN) -> Vec<f64> {
+    let bi = model.passive();
+    let m = sub(&mass_matrix(model, pd, q), bi);
+    let k = sub(&stiffness(model, pd, q), bi);
+    let l = m.cholesky().expect("passive-joint mass matrix is positive definite").l();
     let li = l.try_inverse().expect("invertible");
-    let a = li * k * li.transpose();
-    let a = (a + a.transpose()) * 0.5;
+    let a = &li * k * li.transpose();
+    let a = (&a + a.transpose()) * 0.5;
     let mut ev: Vec<f64> = a.symmetric_eigen().eigenvalues.iter().map(|&l| if l >= 0.0 { l.sqrt() } else { -(-l).sqrt() }).collect();
     ev.sort_by(|x, y| x.partial_cmp(y).unwrap());
-    [ev[0], ev[1], ev[2], ev[3]]
+    ev
 }
 
 /// Eigenvalues of the linearised first-order system about `(q, 0)` over the free joints

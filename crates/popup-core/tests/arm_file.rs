@@ -141,7 +141,7 @@ fn canadarm3_file_compiles_and_runs() {
     }
     let sag = end_effector(&model, &s0.q).z - end_effector(&model, &rigid).z;
     let modes = popup_core::statics::locked_modes(&model, &pd, &s0.q);
-    println!("canadarm3 at {q0:?}: bending {:?}, tip sag {sag:.4} m, locked modes {modes:.2?} rad/s", model.bend_idx.map(|b| s0.q[b]));
+    println!("canadarm3 at {q0:?}: bending {:?}, tip sag {sag:.4} m, locked modes {modes:.2?} rad/s", model.root_bend_idx.map(|b| s0.q[b]));
     assert!(sag < 0.0 && sag > -0.5, "tip sag {sag} m under lunar gravity");
     // hold against lunar gravity, then a 50 N·m step on the shoulder pitch
     let g = gravity_torque(&model, &pd, &s0.q);

@@ -8,16 +8,20 @@
 //!     skew-symmetric with C the Christoffel matrix obtained by polarising RNEA;
 //! (d) the gravity torque RNEA(q, 0, 0, g) == ∂V/∂q by central differences of the
 //!     potential energy computed from the frames (and == `sensor::energy` at v = 0).
+//!
+//! The 50 cases of the arm file's 7-joint chain are followed by 20 cases of expanded chains
+//! (2 or 3 segments per link, torsion joints about the link axes: up to 17 joints).
 
 mod common;
 
 use common::Rng;
+use nalgebra::DMatrix;
 use popup_core::drive::{Drive, Linear3};
 use popup_core::dynamics::{aba, crba, rnea};
 use popup_core::forward::{accel, passive};
 use popup_core::kinematics::prbm::frames;
-use popup_core::math::{Mat3, MatN, Vec3, VecN, NV};
-use popup_core::model::{Disable, Model, Options};
+use popup_core::math::{Mat3, MatN, Vec3, VecN, NMAX};
+use popup_core::model::{Disable, Model, Options, Structure};
 use popup_core::params::{ParamData, Params};
 use popup_core::spec::ArmSpec;
 
@@ -31,10 +35,12 @@ struct Case {
     g: Vec3,
 }
 
+const NSTRUCT: usize = 20;
+
 fn cases() -> Vec<Case> {
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     let spec = ArmSpec::popup_lab();
-    (0..NSTATE)
+    let mut out: Vec<Case> = (0..NSTATE)
         .map(|n| {
             // every third case with the arm file's gravity, the others with a random one
             let g = if n % 3 == 0 { [0.0, 0.0, -9.81] } else { [rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0)] };
@@ -43,14 +49,47 @@ fn cases() -> Vec<Case> {
             let pd = ParamData::new(&model, &params).unwrap();
             let mut q = VecN::zeros();
             let mut v = VecN::zeros();
-            for i in 0..NV {
-                let bending = model.bend_idx.contains(&i);
+            for i in 0..model.nv {
+                let bending = model.bend().contains(&i);
                 q[i] = if bending { rng.uniform(-0.3, 0.3) } else { rng.uniform(-3.2, 3.2) };
                 v[i] = if bending { rng.uniform(-2.0, 2.0) } else { rng.uniform(-3.0, 3.0) };
             }
             Case { g: Vec3::from(g), model, pd, q, v }
         })
-        .collect()
+        .collect();
+    // expanded chains: segments and torsion joints
+    let mut rng = Rng(0x51ED_2701_A5A5_0F0F);
+    for n in 0..NSTRUCT {
+        let structure = Structure { segments: [1 + n % 3, 1 + (n / 3) % 3], torsion: [n % 2 == 0, n % 4 < 2] };
+        let g = [rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0)];
+        let model = Model::compile(&spec, Options { gravity: Some(g), structure, ..Options::default() }).unwrap();
+        let mut effects = popup_core::effects::Effects::default();
+        effects.higher_bending_modes.k_scale = [rng.uniform(0.5, 2.0), rng.uniform(0.5, 2.0)];
+        effects.torsion.k_t = [rng.uniform(100.0, 2000.0), rng.uniform(100.0, 2000.0)];
+        effects.torsion.c_t = [rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0)];
+        let params = Params { payload_kg: rng.uniform(0.0, 5.0), pressure_pa: [rng.uniform(5e3, 95e3), rng.uniform(5e3, 95e3)], effects };
+        let pd = ParamData::new(&model, &params).unwrap();
+        let mut q = VecN::zeros();
+        let mut v = VecN::zeros();
+        for i in 0..model.nv {
+            let passive = model.passive().contains(&i);
+            q[i] = if passive { rng.uniform(-0.3, 0.3) } else { rng.uniform(-3.2, 3.2) };
+            v[i] = if passive { rng.uniform(-2.0, 2.0) } else { rng.uniform(-3.0, 3.0) };
+        }
+        out.push(Case { g: Vec3::from(g), model, pd, q, v });
+    }
+    out
+}
+
+/// The leading nv × nv block of a joint-space matrix.
+fn block(m: &MatN, nv: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(nv, nv, |i, j| m[(i, j)])
+}
+
+/// Solve with the leading nv × nv block (nalgebra's Cholesky on the block).
+fn solve_block(m: &MatN, b: &VecN, nv: usize) -> VecN {
+    let x = block(m, nv).cholesky().expect("M + armature is SPD").solve(&nalgebra::DVector::from_fn(nv, |i, _| b[i]));
+    VecN::from_fn(|i, _| if i < nv { x[i] } else { 0.0 })
 }
 
 fn amax(v: &VecN) -> f64 {
@@ -73,14 +112,15 @@ fn mass_from_kinematics(c: &Case, q: &VecN) -> MatN {
     let f0 = frames(&c.model, q);
     // jp[j][i], jw[j][i]: world velocity of origin i+1 and world angular velocity of body i
     // per unit q̇_j
-    let mut jp = [[Vec3::zeros(); NV]; NV];
-    let mut jw = [[Vec3::zeros(); NV]; NV];
-    for j in 0..NV {
+    let nv = c.model.nv;
+    let mut jp = [[Vec3::zeros(); NMAX]; NMAX];
+    let mut jw = [[Vec3::zeros(); NMAX]; NMAX];
+    for j in 0..nv {
         let (mut qp, mut qm) = (*q, *q);
         qp[j] += h;
         qm[j] -= h;
         let (fp, fm) = (frames(&c.model, &qp), frames(&c.model, &qm));
-        for i in 0..NV {
+        for i in 0..nv {
             jp[j][i] = (fp.p_wb[i + 1] - fm.p_wb[i + 1]) / (2.0 * h);
             let rd: Mat3 = (fp.r_wb[i + 1] - fm.r_wb[i + 1]) / (2.0 * h);
             let w = rd * f0.r_wb[i + 1].transpose(); // = skew(ω)
@@ -88,12 +128,12 @@ fn mass_from_kinematics(c: &Case, q: &VecN) -> MatN {
         }
     }
     let mut m = MatN::zeros();
-    for i in 0..NV {
+    for i in 0..nv {
         let b = &c.pd.body[i];
         let r = f0.r_wb[i + 1];
         let hw = r * b.h;
-        for j in 0..NV {
-            for k in 0..NV {
+        for j in 0..nv {
+            for k in 0..nv {
                 let (pj, pk, wj, wk) = (jp[j][i], jp[k][i], jw[j][i], jw[k][i]);
                 m[(j, k)] += b.m * pj.dot(&pk)
                     + pj.dot(&wk.cross(&hw))
@@ -108,7 +148,7 @@ fn mass_from_kinematics(c: &Case, q: &VecN) -> MatN {
 /// Potential energy of gravity from the frames: V = −Σ g · (m p_i + R_i h_i).
 fn potential(c: &Case, q: &VecN) -> f64 {
     let f = frames(&c.model, q);
-    (0..NV).map(|i| -c.g.dot(&(f.p_wb[i + 1] * c.pd.body[i].m + f.r_wb[i + 1] * c.pd.body[i].h))).sum()
+    (0..c.model.nv).map(|i| -c.g.dot(&(f.p_wb[i + 1] * c.pd.body[i].m + f.r_wb[i + 1] * c.pd.body[i].h))).sum()
 }
 
 #[test]
@@ -118,15 +158,17 @@ fn aba_matches_crba_rnea_forward_dynamics() {
     let mut worst_accel: f64 = 0.0;
     for (n, c) in cases().iter().enumerate() {
         let rot = c.model.rotations(&c.q);
-        let tau = rng.vec(-20.0, 20.0);
+        let nv = c.model.nv;
+        let tau = rng.vec_n(-20.0, 20.0, nv);
         // with the arm's armature and with a random one (zero on every other case)
-        let arm: [f64; NV] = if n % 2 == 0 { c.model.armature } else { std::array::from_fn(|i| if n % 4 == 1 { 0.0 } else { rng.uniform(0.0, 0.2) * (i % 2) as f64 }) };
+        let arm: [f64; NMAX] =
+            if n % 2 == 0 { c.model.armature } else { std::array::from_fn(|i| if n % 4 == 1 || i >= nv { 0.0 } else { rng.uniform(0.0, 0.2) * (i % 2) as f64 }) };
         let mut m = crba(&c.model, &c.pd.body, &rot);
-        for i in 0..NV {
+        for i in 0..nv {
             m[(i, i)] += arm[i];
         }
         let rhs = tau - rnea(&c.model, &c.pd.body, &rot, &c.v, &VecN::zeros(), &c.g);
-        let qdd_crba = m.cholesky().expect("M + armature is SPD").solve(&rhs);
+        let qdd_crba = solve_block(&m, &rhs, nv);
         let qdd_aba = aba(&c.model, &c.pd.body, &rot, &c.v, &tau, &arm, &c.g);
         let rel = amax(&(qdd_aba - qdd_crba)) / amax(&qdd_crba);
         worst = worst.max(rel);
@@ -157,8 +199,9 @@ fn mass_matrix_is_rnea_columns_and_kinetic_energy() {
         let rot = c.model.rotations(&c.q);
         let m = crba(&c.model, &c.pd.body, &rot);
         let scale = m.amax();
+        let nv = c.model.nv;
         let mut cols = MatN::zeros();
-        for j in 0..NV {
+        for j in 0..nv {
             let mut e = VecN::zeros();
             e[j] = 1.0;
             cols.set_column(j, &rnea(&c.model, &c.pd.body, &rot, &VecN::zeros(), &e, &Vec3::zeros()));
@@ -173,10 +216,10 @@ fn mass_matrix_is_rnea_columns_and_kinetic_energy() {
         let d = (m - mk).amax() / scale;
         worst_kin = worst_kin.max(d);
         assert!(d < 1e-7, "case {n}: CRBA vs kinetic-energy M differ by {d:e} (relative)\n{m}\n{mk}");
-        let eig = m.symmetric_eigen().eigenvalues;
+        let eig = block(&m, nv).symmetric_eigen().eigenvalues;
         let (lo, hi) = (eig.min(), eig.max());
         min_ratio = min_ratio.min(lo / hi);
-        assert!(lo > 0.0 && m.cholesky().is_some(), "case {n}: M not positive definite, eigenvalues {eig:?}");
+        assert!(lo > 0.0 && block(&m, nv).cholesky().is_some(), "case {n}: M not positive definite, eigenvalues {eig:?}");
     }
     println!(
         "M: CRBA vs RNEA columns {worst_cols:.2e}, symmetry of RNEA columns {worst_sym:.2e}, CRBA vs kinetic energy (FD Jacobians) {worst_kin:.2e}, min λ_min/λ_max {min_ratio:.2e}"
@@ -191,8 +234,9 @@ fn coriolis_is_lagrangian_and_mdot_minus_2c_skew() {
     for (n, c) in cases().iter().enumerate() {
         let (q, v) = (c.q, c.v);
         let mdot = (mass(c, &(q + v * eps)) - mass(c, &(q - v * eps))) / (2.0 * eps);
+        let nv = c.model.nv;
         let mut grad = VecN::zeros();
-        for k in 0..NV {
+        for k in 0..nv {
             let (mut qp, mut qm) = (q, q);
             qp[k] += eps;
             qm[k] -= eps;
@@ -206,7 +250,7 @@ fn coriolis_is_lagrangian_and_mdot_minus_2c_skew() {
         assert!(d < 1e-7, "case {n}: RNEA bias {cv:?} vs Lagrange Ṁv − ∂T/∂q {lag:?} (rel {d:e})");
         // Christoffel C(q, v) by polarising the quadratic form c(q, ·): C w = (c(v+w) − c(v−w))/4
         let mut cm = MatN::zeros();
-        for j in 0..NV {
+        for j in 0..nv {
             let mut e = VecN::zeros();
             e[j] = 1.0;
             cm.set_column(j, &((bias(c, &q, &(v + e), &zero) - bias(c, &q, &(v - e), &zero)) / 4.0));
@@ -234,7 +278,7 @@ fn gravity_torque_is_gradient_of_potential() {
     for (n, c) in cases().iter().enumerate() {
         let g = bias(c, &c.q, &VecN::zeros(), &c.g);
         let mut dv = VecN::zeros();
-        for k in 0..NV {
+        for k in 0..c.model.nv {
             let (mut qp, mut qm) = (c.q, c.q);
             qp[k] += h;
             qm[k] -= h;
@@ -244,7 +288,7 @@ fn gravity_torque_is_gradient_of_potential() {
         worst = worst.max(d);
         assert!(d < 1e-7, "case {n}: RNEA gravity {g:?} vs ∂V/∂q {dv:?} (rel {d:e})");
         // sensor::energy at v = 0 with springs off is the same potential
-        let opts = Options { gravity: Some(c.g.into()), disable: Disable { spring: true, ..Disable::default() }, ..Options::default() };
+        let opts = Options { gravity: Some(c.g.into()), disable: Disable { spring: true, ..Disable::default() }, structure: c.model.options.structure, ..Options::default() };
         let m2 = Model::compile(&ArmSpec::popup_lab(), opts).unwrap();
         let pd2 = ParamData::new(&m2, &c.pd.params).unwrap();
         let e = popup_core::sensor::energy(&m2, &pd2, 0.0, &c.q, &VecN::zeros());
@@ -254,7 +298,7 @@ fn gravity_torque_is_gradient_of_potential() {
         assert!(de < 1e-12, "case {n}: sensor::energy {e} vs V {v0}");
         // and the spring term is ½ Σ k δ² when springs are on
         let es = popup_core::sensor::energy(&c.model, &c.pd, 0.0, &c.q, &VecN::zeros());
-        let spring: f64 = c.model.bend_idx.iter().map(|&b| 0.5 * c.pd.k[b] * c.q[b] * c.q[b]).sum();
+        let spring: f64 = c.model.passive().iter().map(|&b| 0.5 * c.pd.k[b] * c.q[b] * c.q[b]).sum();
         assert!((es - v0 - spring).abs() < 1e-9 * (es.abs() + 1.0), "case {n}: energy with springs {es} vs {}", v0 + spring);
     }
     println!("gravity torque vs ∂V/∂q (FD): worst relative {worst:.2e}; sensor::energy vs V: {worst_energy:.2e}");

@@ -363,10 +363,21 @@ fn replay_once(m: &Model, t: &[f64], y: &[[f64; 3]]) -> Trajectory {
 }
 
 #[test]
-fn structural_parameters_must_match_the_compiled_model() {
-    let m = model();
-    let mut fx = Effects::default();
-    fx.torsion.k_t = [50.0, f64::INFINITY];
+fn structural_effects_in_the_arm_file_compile_the_extra_joints() {
+    // torsion and segments in the arm file's [effects] give the model its extra joints
+    let mut spec = ArmSpec::popup_lab();
+    spec.effects.torsion.k_t = [50.0, f64::INFINITY];
+    spec.effects.higher_bending_modes.segments = [1.0, 2.0];
+    let m = Model::compile(&spec, Options::default()).unwrap();
+    assert_eq!(m.nv, 7 + 1 + 2);
+    assert!(m.torsion_idx[0].is_some() && m.torsion_idx[1].is_none());
+    // the rollout's k_t must be finite where the joint exists
+    let mut fx = spec.effects;
+    fx.torsion.k_t[0] = f64::INFINITY;
     let e = ParamData::new(&m, &Params { payload_kg: 1.0, pressure_pa: [30e3; 2], effects: fx }).unwrap_err().to_string();
-    assert!(e.contains("effects.torsion.k_t[0]") && e.contains("structural"), "{e}");
+    assert!(e.contains("effects.torsion.k_t[0]") && e.contains("torsion joint"), "{e}");
+    // and a contradictory Options.structure is refused
+    let opts = Options { structure: popup_core::model::Structure { segments: [3, 1], torsion: [false; 2] }, ..Options::default() };
+    let e = Model::compile(&spec, opts).unwrap_err().to_string();
+    assert!(e.contains("options.structure"), "{e}");
 }

@@ -47,7 +47,7 @@ fn initial(small: bool) -> State {
     let m = model(1e-3, Integrator::Rk4, false);
     let pd = ParamData::new(&m, &params()).unwrap();
     let [i1, i2, i3] = m.motor_idx;
-    let [_, b12, b21, b22] = m.bend_idx;
+    let [_, b12, b21, b22] = m.root_bend_idx;
     if small {
         let mut s = rest_state(&m, &pd, 0.0, [0.0, -FRAC_PI_2, 0.0]).unwrap();
         s.q[b12] += 0.02;
@@ -182,7 +182,7 @@ fn replay_rk4_is_fourth_order_on_the_bending_joints() {
         let m = model(dt, Integrator::Rk4, true);
         let pd = ParamData::new(&m, &params()).unwrap();
         let cfg = RunConfig { drive: drive.clone(), initial: None, duration: None, sample_period: knot, check_step: true };
-        (run(&m, &pd, &cfg).unwrap(), m.bend_idx, m.motor_idx)
+        (run(&m, &pd, &cfg).unwrap(), m.root_bend_idx, m.motor_idx)
     };
     let (rtr, bend, motors) = go(knot / 64.0);
     let reference = rtr.final_state;

@@ -10,7 +10,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReado
 use popup_core::drive::{Drive, Linear3, Spline3};
 use popup_core::effects::{Effects, NE};
 use popup_core::kinematics::prbm::frames;
-use popup_core::math::{VecN, NV};
+use popup_core::math::VecN;
 use popup_core::model::{Disable, Integrator, Model, Options};
 use popup_core::params::{ParamData, Params};
 use popup_core::rollout::{rollout, Job};
@@ -28,11 +28,12 @@ pub struct PyModel {
     pub m: Arc<Model>,
 }
 
-fn vecn(py: Python<'_>, what: &str, q: &[f64]) -> PyResult<VecN> {
-    if q.len() != NV {
-        return Err(make(py, "InputError", &format!("input {what}: expected {NV} joint values, got {}", q.len())));
+/// A joint vector of the model (`nv` values; the capacity beyond stays 0).
+fn vecn(py: Python<'_>, m: &Model, what: &str, q: &[f64]) -> PyResult<VecN> {
+    if q.len() != m.nv {
+        return Err(make(py, "InputError", &format!("input {what}: expected {} joint values, got {}", m.nv, q.len())));
     }
-    Ok(VecN::from_column_slice(q))
+    Ok(VecN::from_fn(|i, _| if i < q.len() { q[i] } else { 0.0 }))
 }
 
 impl PyModel {
@@ -71,7 +72,7 @@ impl PyModel {
                 other => return Err(make(py, "ParameterError", &format!("invalid parameter disable = {other:?}: must be one of \"gravity\", \"spring\", \"damper\""))),
             }
         }
-        let options = Options { dt, integrator: Integrator::parse(integrator).py()?, gravity, disable: d };
+        let options = Options { dt, integrator: Integrator::parse(integrator).py()?, gravity, disable: d, ..Options::default() };
         Ok(PyModel { m: Arc::new(Model::compile(&arm.spec, options).py()?) })
     }
 
@@ -129,7 +130,7 @@ impl PyModel {
     /// Chain indices of the bending joints.
     #[getter]
     fn bend_index(&self) -> Vec<usize> {
-        self.m.bend_idx.to_vec()
+        self.m.bend().to_vec()
     }
     /// Wrinkling coefficient c in M_w = c · p · r³.
     #[getter]
@@ -151,47 +152,49 @@ impl PyModel {
     fn param_data<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2]) -> PyResult<Bound<'py, PyDict>> {
         let pd = self.pd(payload_kg, pressure_pa)?;
         let d = PyDict::new(py);
-        d.set_item("k", pd.k.to_vec())?;
-        d.set_item("c", pd.c.to_vec())?;
+        d.set_item("k", pd.k[..self.m.nv].to_vec())?;
+        d.set_item("c", pd.c[..self.m.nv].to_vec())?;
         d.set_item("mw", pd.mw.to_vec())?;
         d.set_item("warnings", pd.warnings.clone())?;
         Ok(d)
     }
 
-    /// Joint coordinates (7,) at rest: motors at `q_motor`, bending joints in static
+    /// Joint coordinates (nv,) (7 for the arm file's chain) at rest: motors at `q_motor`, bending joints in static
     /// equilibrium.
     fn rest_state<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q_motor: [f64; 3]) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let pd = self.pd(payload_kg, pressure_pa)?;
         let st = rest_state(&self.m, &pd, 0.0, q_motor).py()?;
-        Ok(PyArray1::from_slice(py, st.q.as_slice()))
+        Ok(PyArray1::from_slice(py, &st.q.as_slice()[..self.m.nv]))
     }
 
-    /// Locked-motor natural frequencies of the bending joints about q (7,) [rad/s].
+    /// Locked-motor natural frequencies of the passive joints about q (nv,) [rad/s].
     fn locked_modes<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let pd = self.pd(payload_kg, pressure_pa)?;
-        let q = vecn(py, "q", &q)?;
+        let q = vecn(py, &self.m, "q", &q)?;
         Ok(PyArray1::from_slice(py, &statics::locked_modes(&self.m, &pd, &q)))
     }
 
-    /// Mass matrix (7, 7) with armature [kg·m²].
+    /// Mass matrix (nv, nv) with armature [kg·m²].
     fn mass_matrix<'py>(&self, py: Python<'py>, payload_kg: f64, q: Vec<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let pd = self.pd_default_pressure(payload_kg)?;
-        let m = statics::mass_matrix(&self.m, &pd, &vecn(py, "q", &q)?);
-        Ok(Array2::from_shape_fn((NV, NV), |(i, j)| m[(i, j)]).into_pyarray(py))
+        let m = statics::mass_matrix(&self.m, &pd, &vecn(py, &self.m, "q", &q)?);
+        let nv = self.m.nv;
+        Ok(Array2::from_shape_fn((nv, nv), |(i, j)| m[(i, j)]).into_pyarray(py))
     }
 
-    /// Generalised gravity forces G(q) (7,) [N·m].
+    /// Generalised gravity forces G(q) (nv,) [N·m].
     fn gravity_torque<'py>(&self, py: Python<'py>, payload_kg: f64, q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let pd = self.pd_default_pressure(payload_kg)?;
-        let g = statics::gravity_torque(&self.m, &pd, &vecn(py, "q", &q)?);
-        Ok(PyArray1::from_slice(py, g.as_slice()))
+        let g = statics::gravity_torque(&self.m, &pd, &vecn(py, &self.m, "q", &q)?);
+        Ok(PyArray1::from_slice(py, &g.as_slice()[..self.m.nv]))
     }
 
-    /// Homogeneous transforms T_W_i of frames 0..7, shape (8, 4, 4).
+    /// Homogeneous transforms T_W_i of frames 0..nv, shape (nv + 1, 4, 4).
     fn frames<'py>(&self, py: Python<'py>, q: Vec<f64>) -> PyResult<Bound<'py, PyArray3<f64>>> {
-        let f = frames(&self.m, &vecn(py, "q", &q)?);
-        let mut out = Array3::<f64>::zeros((NV + 1, 4, 4));
-        for i in 0..=NV {
+        let f = frames(&self.m, &vecn(py, &self.m, "q", &q)?);
+        let nv = self.m.nv;
+        let mut out = Array3::<f64>::zeros((nv + 1, 4, 4));
+        for i in 0..=nv {
             for a in 0..3 {
                 for b in 0..3 {
                     out[[i, a, b]] = f.r_wb[i][(a, b)];
@@ -205,7 +208,7 @@ impl PyModel {
 
     /// End-effector position p_WE (3,) [m].
     fn end_effector<'py>(&self, py: Python<'py>, q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let p = popup_core::kinematics::prbm::end_effector(&self.m, &vecn(py, "q", &q)?);
+        let p = popup_core::kinematics::prbm::end_effector(&self.m, &vecn(py, &self.m, "q", &q)?);
         Ok(PyArray1::from_slice(py, p.as_slice()))
     }
 
@@ -213,14 +216,14 @@ impl PyModel {
     /// the arm linearised about q (free joints: bending only when `replay`).
     fn check_step(&self, py: Python<'_>, payload_kg: f64, pressure_pa: [f64; 2], q: Vec<f64>, replay: bool) -> PyResult<()> {
         let pd = self.pd(payload_kg, pressure_pa)?;
-        check_step(&self.m, &pd, &vecn(py, "q", &q)?, replay).py()
+        check_step(&self.m, &pd, &vecn(py, &self.m, "q", &q)?, replay).py()
     }
 
     /// Batched rollout (GIL released, `threads` rayon threads, 0 = all cores).
     ///
     /// payload_kg (B,), pressure_pa (B, 2); drive "torque" or "replay"; times (N,) shared
     /// by all jobs; values (B, N, 3): torques [N·m] or encoder angles [rad];
-    /// initial_q/initial_v (B, 7) or None (rest state); t0 start time for torque runs;
+    /// initial_q/initial_v (B, nv) or None (rest state); t0 start time for torque runs;
     /// duration [s] (None for replay = span of `times`); sample_period [s].
     /// Returns (data (B, S, NCH), errors [None | (class, message)], alarms
     /// [[(link, t_start, t_end, peak_ratio)]], warnings [[str]]). Failed rows are NaN.
@@ -278,8 +281,8 @@ impl PyModel {
         let iv = initial_v.map(|a| a.as_array().to_owned());
         for (name, a) in [("initial_q", &iq), ("initial_v", &iv)] {
             if let Some(a) = a {
-                if a.shape() != [nb, NV] {
-                    return Err(bad(format!("input {name}: expected shape ({nb}, {NV}), got {:?}", a.shape())));
+                if a.shape() != [nb, self.m.nv] {
+                    return Err(bad(format!("input {name}: expected shape ({nb}, {}), got {:?}", self.m.nv, a.shape())));
                 }
             }
         }
@@ -291,14 +294,15 @@ impl PyModel {
             "replay" => true,
             other => return Err(bad(format!("input drive: {other:?} must be \"torque\" or \"replay\""))),
         };
+        let nv = self.m.nv;
         let mut jobs = Vec::with_capacity(nb);
         for b in 0..nb {
             let rows: Vec<[f64; 3]> = (0..t.len()).map(|k| [vals[[b, k, 0]], vals[[b, k, 1]], vals[[b, k, 2]]]).collect();
             let drv = if is_replay { Drive::Replay(Spline3::new(&t, &rows).py()?) } else { Drive::Torque(Linear3::new(&t, &rows).py()?) };
             let initial = iq.as_ref().map(|q| State {
                 t: t[0],
-                q: VecN::from_fn(|i, _| q[[b, i]]),
-                v: VecN::from_fn(|i, _| iv.as_ref().map_or(0.0, |v| v[[b, i]])),
+                q: VecN::from_fn(|i, _| if i < nv { q[[b, i]] } else { 0.0 }),
+                v: VecN::from_fn(|i, _| if i < nv { iv.as_ref().map_or(0.0, |v| v[[b, i]]) } else { 0.0 }),
             });
             jobs.push(Job {
                 params: Params { payload_kg: payload[b], pressure_pa: [pressure[[b, 0]], pressure[[b, 1]]], effects: fx[b] },

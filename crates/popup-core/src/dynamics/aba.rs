@@ -3,7 +3,7 @@
 //! An independent forward-dynamics path used to cross-check CRBA + RNEA; it is not on the
 //! hot path. Spatial vectors are `[angular; linear]` in body axes at the frame origin.
 
-use crate::math::{skew, Mat3, Vec3, VecN, NV};
+use crate::math::{skew, Mat3, Vec3, VecN, NMAX};
 use crate::model::{Model, Rbi};
 use nalgebra::{Matrix6, Vector6};
 
@@ -42,15 +42,16 @@ fn crf(v: &Vector6<f64>) -> Matrix6<f64> {
 
 /// Forward dynamics q̈ = ABA(q, q̇, τ) of the bare chain with `armature` added on the joint
 /// diagonal; `g` gravity in the base frame [m/s²].
-pub fn aba(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV], v: &VecN, tau: &VecN, armature: &[f64; NV], g: &Vec3) -> VecN {
-    let mut x = [Matrix6::zeros(); NV];
-    let mut s = [Vector6::zeros(); NV];
-    let mut vel = [Vector6::zeros(); NV];
-    let mut c = [Vector6::zeros(); NV];
-    let mut ia = [Matrix6::zeros(); NV];
-    let mut pa = [Vector6::zeros(); NV];
+pub fn aba(model: &Model, body: &[Rbi; NMAX], rot: &[Mat3; NMAX], v: &VecN, tau: &VecN, armature: &[f64; NMAX], g: &Vec3) -> VecN {
+    let nv = model.nv;
+    let mut x = [Matrix6::zeros(); NMAX];
+    let mut s = [Vector6::zeros(); NMAX];
+    let mut vel = [Vector6::zeros(); NMAX];
+    let mut c = [Vector6::zeros(); NMAX];
+    let mut ia = [Matrix6::zeros(); NMAX];
+    let mut pa = [Vector6::zeros(); NMAX];
     let mut vp = Vector6::zeros();
-    for i in 0..NV {
+    for i in 0..nv {
         let j = &model.joints[i];
         x[i] = xform(&rot[i], &j.r);
         let uxr = j.u.cross(&j.r);
@@ -61,10 +62,10 @@ pub fn aba(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV], v: &VecN, tau: &Ve
         pa[i] = crf(&vel[i]) * ia[i] * vel[i];
         vp = vel[i];
     }
-    let mut uu = [Vector6::zeros(); NV];
-    let mut d = [0.0; NV];
-    let mut u = [0.0; NV];
-    for i in (0..NV).rev() {
+    let mut uu = [Vector6::zeros(); NMAX];
+    let mut d = [0.0; NMAX];
+    let mut u = [0.0; NMAX];
+    for i in (0..nv).rev() {
         uu[i] = ia[i] * s[i];
         d[i] = s[i].dot(&uu[i]) + armature[i];
         u[i] = tau[i] - s[i].dot(&pa[i]);
@@ -77,7 +78,7 @@ pub fn aba(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV], v: &VecN, tau: &Ve
     }
     let mut qdd = VecN::zeros();
     let mut ap = Vector6::new(0.0, 0.0, 0.0, -g.x, -g.y, -g.z);
-    for i in 0..NV {
+    for i in 0..nv {
         let ai = x[i] * ap + c[i];
         qdd[i] = (u[i] - uu[i].dot(&ai)) / d[i];
         ap = ai + s[i] * qdd[i];

@@ -5,22 +5,32 @@
 //! so `M_ii = S_iᵀ Ic_i S_i` and the off-diagonal terms follow by transforming the force
 //! `Ic_i S_i` down the chain.
 
-use crate::math::{Mat3, MatN, NV};
+use crate::math::{Mat3, MatN, NMAX};
 use crate::model::{Model, Rbi};
 
-/// Mass matrix M(q) (nv × nv) [kg·m²] without armature.
+/// Mass matrix M(q) (leading nv × nv block; the rest 0) [kg·m²] without armature.
+///
+/// One tip → base sweep: the composite inertia of body i (`body[i]` plus its child's
+/// composite moved to frame i) is formed and at once used for row/column i.
 #[inline]
-pub fn crba(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV]) -> MatN {
+pub fn crba(model: &Model, body: &[Rbi; NMAX], rot: &[Mat3; NMAX]) -> MatN {
     let mut m = MatN::zeros();
-    let mut ic = *body;
-    for i in (1..NV).rev() {
-        let c = ic[i].to_parent(&rot[i], &model.joints[i].r);
-        ic[i - 1] = ic[i - 1].add(&c);
-    }
-    for i in 0..NV {
+    crba_into(model, body, rot, &mut m);
+    m
+}
+
+/// [`crba`] into `m`: writes every entry of the leading nv × nv block and nothing else (a
+/// scratch matrix that is zero outside that block stays so; no 17 × 17 clearing per call).
+#[inline]
+pub fn crba_into(model: &Model, body: &[Rbi; NMAX], rot: &[Mat3; NMAX], m: &mut MatN) {
+    let nv = model.nv;
+    let mut c = body[nv - 1];
+    for i in (0..nv).rev() {
+        if i + 1 < nv {
+            c = body[i].add(&c.to_parent(&rot[i + 1], &model.joints[i + 1].r));
+        }
         let ji = &model.joints[i];
         let (sw, sv) = (ji.u, ji.u.cross(&ji.r));
-        let c = &ic[i];
         // force (n, f) = Ic S about origin i
         let mut n = c.j * sw + c.h.cross(&sv);
         let mut f = sv * c.m + sw.cross(&c.h);
@@ -37,5 +47,4 @@ pub fn crba(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV]) -> MatN {
             m[(k, i)] = v;
         }
     }
-    m
 }

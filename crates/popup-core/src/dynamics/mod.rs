@@ -5,5 +5,5 @@ pub mod crba;
 pub mod rnea;
 
 pub use aba::aba;
-pub use crba::crba;
+pub use crba::{crba, crba_into};
 pub use rnea::{forward_pass, rnea, BodyMotion};

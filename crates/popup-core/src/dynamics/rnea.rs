@@ -9,29 +9,30 @@
 //! `n_i = J ω̇ + ω × J ω + h × a_i + R_{i+1}(n_{i+1} + r_{i+1} × f_{i+1})`,
 //! `τ_i = u_i · (n_i + r_i × f_i)` (moment about the joint axis through origin i-1).
 
-use crate::math::{Mat3, Vec3, VecN, NV};
+use crate::math::{Mat3, Vec3, VecN, NMAX};
 use crate::model::{Model, Rbi};
 
-/// Body velocities and accelerations from the forward pass, in body axes.
+/// Body velocities and accelerations from the forward pass, in body axes (entries `>= nv`
+/// are 0).
 #[derive(Debug, Clone, Copy)]
 pub struct BodyMotion {
     /// Angular velocity ω_i [rad/s].
-    pub w: [Vec3; NV],
+    pub w: [Vec3; NMAX],
     /// Angular acceleration ω̇_i [rad/s²].
-    pub wd: [Vec3; NV],
+    pub wd: [Vec3; NMAX],
     /// Classical acceleration of origin i minus gravity (specific force) [m/s²].
-    pub a: [Vec3; NV],
+    pub a: [Vec3; NMAX],
 }
 
 /// Forward pass: body motion for joint rates `v` and accelerations `qdd`, with the base
 /// accelerating at `a0 = −g` (base axes).
 #[inline]
-pub fn forward_pass(model: &Model, rot: &[Mat3; NV], v: &VecN, qdd: &VecN, a0: &Vec3) -> BodyMotion {
-    let mut w = [Vec3::zeros(); NV];
-    let mut wd = [Vec3::zeros(); NV];
-    let mut a = [Vec3::zeros(); NV];
+pub fn forward_pass(model: &Model, rot: &[Mat3; NMAX], v: &VecN, qdd: &VecN, a0: &Vec3) -> BodyMotion {
+    let mut w = [Vec3::zeros(); NMAX];
+    let mut wd = [Vec3::zeros(); NMAX];
+    let mut a = [Vec3::zeros(); NMAX];
     let (mut wp, mut wdp, mut ap) = (Vec3::zeros(), Vec3::zeros(), *a0);
-    for i in 0..NV {
+    for i in 0..model.nv {
         let j = &model.joints[i];
         let e = rot[i].transpose();
         let we = e * wp;
@@ -51,23 +52,24 @@ pub fn forward_pass(model: &Model, rot: &[Mat3; NV], v: &VecN, qdd: &VecN, a0: &
 /// Joint forces τ = M(q) q̈ + C(q, q̇) q̇ + G(q) of the bare chain (no springs, dampers or
 /// armature) [N·m]. `g` is gravity in the base frame [m/s²].
 #[inline]
-pub fn rnea(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV], v: &VecN, qdd: &VecN, g: &Vec3) -> VecN {
+pub fn rnea(model: &Model, body: &[Rbi; NMAX], rot: &[Mat3; NMAX], v: &VecN, qdd: &VecN, g: &Vec3) -> VecN {
     let bm = forward_pass(model, rot, v, qdd, &(-g));
     backward_pass(model, body, rot, &bm)
 }
 
 /// Backward pass of RNEA given the body motion.
 #[inline]
-pub fn backward_pass(model: &Model, body: &[Rbi; NV], rot: &[Mat3; NV], bm: &BodyMotion) -> VecN {
+pub fn backward_pass(model: &Model, body: &[Rbi; NMAX], rot: &[Mat3; NMAX], bm: &BodyMotion) -> VecN {
     let mut tau = VecN::zeros();
     let mut fc = Vec3::zeros();
     let mut nc = Vec3::zeros();
-    for i in (0..NV).rev() {
+    let nv = model.nv;
+    for i in (0..nv).rev() {
         let b = &body[i];
         let (w, wd, a) = (bm.w[i], bm.wd[i], bm.a[i]);
         let mut f = a * b.m + wd.cross(&b.h) + w.cross(&w.cross(&b.h));
         let mut n = b.j * wd + w.cross(&(b.j * w)) + b.h.cross(&a);
-        if i + 1 < NV {
+        if i + 1 < nv {
             let rc = &rot[i + 1];
             let rn = &model.joints[i + 1].r;
             f += rc * fc;

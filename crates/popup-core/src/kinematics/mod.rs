@@ -1,4 +1,5 @@
-//! Kinematics: the 7-DOF PRBM chain and the rigid 3-DOF equivalents.
+//! Kinematics: the PRBM chain (7 joints, more with segments and torsion joints) and the rigid
+//! 3-DOF equivalents.
 
 pub mod prbm;
 pub mod rigid;

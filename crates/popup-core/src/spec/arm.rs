@@ -16,6 +16,10 @@ pub enum JointKind {
     Motor,
     /// A passive bending joint of an inflatable link (torsional spring and damper).
     Bending,
+    /// A passive torsion joint about a link's own long axis (spring k_t, damper c_t). Not
+    /// written in arm files: `Model::compile` inserts it when `Options::structure` asks for
+    /// the `torsion` effect.
+    Torsion,
 }
 
 /// One DH row of the PRBM chain.

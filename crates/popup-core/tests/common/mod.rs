@@ -2,7 +2,7 @@
 #![allow(dead_code)]
 
 use popup_core::drive::{Drive, Linear3};
-use popup_core::math::{VecN, NV};
+use popup_core::math::VecN;
 use popup_core::model::Model;
 use popup_core::sensor::{channel_index, NCH};
 use popup_core::sim::{State, Trajectory};
@@ -22,8 +22,9 @@ impl Rng {
         let u = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
         lo + (hi - lo) * u
     }
-    pub fn vec(&mut self, lo: f64, hi: f64) -> VecN {
-        VecN::from_fn(|_, _| self.uniform(lo, hi))
+    /// Uniform entries in [lo, hi) for the first `n` joints, 0 beyond.
+    pub fn vec_n(&mut self, lo: f64, hi: f64, n: usize) -> VecN {
+        VecN::from_fn(|i, _| if i < n { self.uniform(lo, hi) } else { 0.0 })
     }
 }
 
@@ -47,16 +48,17 @@ pub fn state_of_row(model: &Model, tr: &Trajectory, r: usize) -> State {
         q[model.motor_idx[k]] = row[1 + k];
         v[model.motor_idx[k]] = row[4 + k];
     }
+    assert!(model.segments == [1, 1] && model.torsion_idx == [None, None], "state_of_row needs the 7-joint chain");
     for a in 0..4 {
-        q[model.bend_idx[a]] = row[21 + a];
-        v[model.bend_idx[a]] = row[25 + a];
+        q[model.root_bend_idx[a]] = row[21 + a];
+        v[model.root_bend_idx[a]] = row[25 + a];
     }
     State { t: row[0], q, v }
 }
 
 /// Max-abs difference of the joint coordinates of two states.
 pub fn qdiff(a: &State, b: &State) -> f64 {
-    (0..NV).map(|i| (a.q[i] - b.q[i]).abs()).fold(0.0, f64::max)
+    (0..a.q.len()).map(|i| (a.q[i] - b.q[i]).abs()).fold(0.0, f64::max)
 }
 
 /// log2 of successive error ratios.
