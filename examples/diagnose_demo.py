@@ -37,7 +37,7 @@ def main() -> None:
         better = best.apply(model)
         err, _ = popup.diagnosis.model_error(better, run)
         print(f"\n3. add the top suspect: model.with_effect({best.effect!r}, ...)")
-        print(f"   fitted: {popup.diagnosis._fmt_params({k: v for k, v in best.params.items() if k in best.ci95}, best.ci95)}")
+        print(f"   fitted: {best.params_text()}")
         print(f"   error {d.nominal_error:.4f} -> {err:.4f} (predicted {best.error_after:.4f})")
 
     h = popup.improve(model, run)

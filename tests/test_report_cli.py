@@ -80,3 +80,20 @@ def test_history_and_diagnosis_objects_plot_and_tabulate():
     ax = h.diagnoses[0].plot()
     assert ax.patches
     assert h.model.effects["payload_mass"]["delta_kg"][0] == pytest.approx(0.3, abs=0.02)
+
+
+def test_rollout_count_is_the_number_of_simulations_run(monkeypatch):
+    run = popup.read_run(RUN)
+    model = run.model()
+    counted = []
+    orig = popup.Model.rollout
+
+    def counting(self, **kw):
+        res = orig(self, **kw)
+        counted.append(len(res))
+        return res
+
+    monkeypatch.setattr(popup.Model, "rollout", counting)
+    d = popup.diagnose(model, run, effects=["payload_mass", "higher_bending_modes"])
+    assert d.n_rollouts == sum(counted)
+    assert [s.n_rollouts for s in d.suspects] and all(s.n_rollouts > 2 for s in d.suspects)

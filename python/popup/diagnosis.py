@@ -259,6 +259,8 @@ class Suspect:
         ``value`` and ``text``.
     n_eff : float
         Effective number of independent residual samples used in the score.
+    n_rollouts : int
+        Simulations this effect's seeds and fit used.
     message : str
         Why the effect could not be tried, if it could not ("" otherwise).
     """
@@ -275,12 +277,15 @@ class Suspect:
     n_eff: float = 0.0
     n_rollouts: int = 0
     message: str = ""
-    _flat: Optional[np.ndarray] = field(default=None, repr=False)
 
     @property
     def relative_drop(self) -> float:
         """1 − error_after/error_before."""
         return 1.0 - self.error_after / self.error_before if self.error_before > 0 else 0.0
+
+    def params_text(self) -> str:
+        """The fitted parameters with their 95 % half-widths, e.g. ``delta_kg=0.3006±0.00039``."""
+        return _fmt_params({k: v for k, v in self.params.items() if k in self.ci95}, self.ci95)
 
     def apply(self, model: "Model") -> "Model":
         """``model`` with this effect switched on at its fitted values."""
@@ -844,9 +849,9 @@ def diagnose(
     have = set(fx.active(base_flat))
     suspects: List[Suspect] = []
     for name in names:
-        ev = _evidence(name, cmp, prob)
         if name in have:
             continue
+        ev = _evidence(name, cmp, prob)
         s = _try_effect(model, run, prob, name, base_flat, rss0, e0, ev, sr, threads, max_iter)
         suspects.append(s)
     suspects.sort(key=lambda s: (not s.significant, -s.score if math.isfinite(s.score) else math.inf))
@@ -861,7 +866,7 @@ def diagnose(
         conclusion=conclusion,
         run=str(run.source),
         seconds=time.perf_counter() - t_start,
-        n_rollouts=prob.nfev + sum(s.n_rollouts for s in suspects),
+        n_rollouts=2 + sum(s.n_rollouts for s in suspects),  # the comparison, the nominal residual, the fits
     )
 
 
@@ -872,16 +877,18 @@ def _try_effect(
     m = model
     p = prob
     flat = base_flat.copy()
+    start = prob.nfev
     try:
         if struct is not None:
             m = model.with_effect(name, **struct)
             p = _Problem(m, run, prob.channels, sr, threads)
+            start = 0
             flat = m.effects_flat
         free = _free_params(name)
         x0 = _best_seed(p, name, free, flat, _x0(p, free, flat))
         x, flat_fit, r, J = _fit(p, flat, free, x0, max(max_iter, _MIN_ITER.get(name, 0)))
     except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
-        return Suspect(name, False, -math.inf, {}, {}, e0, e0, {}, ev, message=f"{type(e).__name__}: {e}")
+        return Suspect(name, False, -math.inf, {}, {}, e0, e0, {}, ev, n_rollouts=p.nfev - start, message=f"{type(e).__name__}: {e}")
     e1, per1 = p.error(r)
     rss1 = float(np.sum(r * r))
     neff = p.n_eff(r)
@@ -891,7 +898,7 @@ def _try_effect(
     sig = bool(score > SCORE_THRESHOLD and drop >= MIN_RELATIVE_DROP)
     params = _params_dict(name, flat_fit)
     ci = _ci(p, r, J, free, neff)
-    return Suspect(name, sig, float(score), params, ci, e0, e1, per1, ev, n_eff=neff, n_rollouts=p.nfev, _flat=flat_fit)
+    return Suspect(name, sig, float(score), params, ci, e0, e1, per1, ev, n_eff=neff, n_rollouts=p.nfev - start)
 
 
 def _conclude(suspects: List[Suspect], white: bool, e0: float) -> str:
@@ -1007,7 +1014,7 @@ def cli_main(argv: Sequence[str]) -> int:
     print(f"{'rank':>4}  {'effect':<22}{'sig':<5}{'score':>10}{'error after':>13}{'drop':>7}  parameters")
     for i, s in enumerate(d0.suspects, 1):
         score = f"{s.score:.1f}" if math.isfinite(s.score) else "n/a"
-        params = _fmt_params({k: v for k, v in s.params.items() if k in s.ci95}, s.ci95) or s.message
+        params = s.params_text() or s.message
         print(f"{i:>4}  {s.effect:<22}{'yes' if s.significant else 'no':<5}{score:>10}{s.error_after:>13.4g}{100 * s.relative_drop:>6.0f}%  {params}")
     print()
     print("error history:")

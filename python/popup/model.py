@@ -245,7 +245,7 @@ class Model:
 
     # ------------------------------------------------------------------ statics & kinematics
     def rest_state(self, q_motor: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-        """Joint coordinates (7,) at rest: motors at ``q_motor`` [rad], bending joints in
+        """Joint coordinates (nv,) at rest (nv = len(joint_names): 7, more with segments/torsion): motors at ``q_motor`` [rad], bending joints in
         static equilibrium under gravity and payload."""
         return np.asarray(self._m.rest_state(self.payload_kg, self.pressure_pa, list(map(float, q_motor))))
 
@@ -262,7 +262,7 @@ class Model:
         return g[list(self._m.motor_index)]
 
     def end_effector(self, q: Sequence[float]) -> np.ndarray:
-        """End-effector position p_WE (3,) [m] for chain coordinates q (7,)."""
+        """End-effector position p_WE (3,) [m] for chain coordinates q (nv,)."""
         return np.asarray(self._m.end_effector(list(map(float, q))))
 
     def frames(self, q: Sequence[float]) -> np.ndarray:
@@ -300,7 +300,7 @@ class Model:
             ``dt`` from 0), interpolated linearly and held after the last sample.
         duration : float
             Simulated time [s].
-        initial_q, initial_v : (7,) arrays, optional
+        initial_q, initial_v : (nv,) arrays, optional
             Initial chain coordinates [rad] and rates [rad/s]; default: at rest with the
             motors at 0 and the bending joints in static equilibrium.
         sample_rate : float
@@ -368,7 +368,7 @@ class Model:
         Every argument may carry a leading batch axis; singletons are tiled. Shapes:
         payload_kg ``([B])``, pressure_pa ``([B] x 2)``, torque ``(3,)`` (constant),
         ``(N x 3)`` (time samples) or ``(B x N x 3)`` (N = 1: constant per run), encoder_q ``([B] x N x 3)`` with encoder_t ``(N,)`` shared,
-        initial_q/initial_v ``([B] x 7)``. Give either torques (with ``duration``) or
+        initial_q/initial_v ``([B] x nv)``. Give either torques (with ``duration``) or
         encoder samples. ``threads=0`` uses all cores.
 
         ``effects``: flat effect vectors ``([B] x NE)`` (see :mod:`popup.effects`) to vary
@@ -416,7 +416,7 @@ class Model:
             vals = tq
             drive = "torque"
         nb = max(pay.shape[0], pres.shape[0] if pres.ndim == 2 else 1, vals.shape[0] if vals.ndim == 3 else 1)
-        for name, x in (("initial_q", initial_q), ("initial_v", initial_v)):
+        for name, x in (("initial_q", initial_q), ("initial_v", initial_v), ("effects", effects)):
             if x is not None and np.ndim(x) == 2:
                 nb = max(nb, np.shape(x)[0])
         pay_b = _tile("payload_kg", pay, nb, 0) if pay.shape[0] > 1 else np.full(nb, pay[0])
@@ -426,17 +426,7 @@ class Model:
         iv = None if initial_v is None else _tile("initial_v", _as_float_array("initial_v", initial_v, np.ndim(initial_v)), nb, 1)
         if iv is not None and iq is None:
             raise InputError("input initial_v: given without initial_q")
-        fx_b = None
-        if effects is not None:
-            fx_arr = np.asarray(effects, dtype=np.float64)
-            if fx_arr.ndim == 2:
-                nb = max(nb, fx_arr.shape[0])
-                pay_b = np.full(nb, pay[0]) if pay.shape[0] == 1 else _tile("payload_kg", pay, nb, 0)
-                pres_b = _tile("pressure_pa", pres, nb, 1)
-                vals_b = _tile("values", vals, nb, 2)
-                iq = None if iq is None else _tile("initial_q", iq, nb, 1)
-                iv = None if iv is None else _tile("initial_v", iv, nb, 1)
-            fx_b = np.ascontiguousarray(_tile("effects", fx_arr, nb, 1))
+        fx_b = None if effects is None else np.ascontiguousarray(_tile("effects", np.asarray(effects, dtype=np.float64), nb, 1))
         if not (np.isfinite(sample_rate) and sample_rate > 0):
             raise InputError(f"input sample_rate: {sample_rate} Hz must be finite and > 0")
         data, errors, alarms, warns = self._m.rollout(
