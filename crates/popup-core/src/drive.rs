@@ -159,11 +159,24 @@ pub enum Drive {
     Torque(Linear3),
     /// Encoder-driven replay: the motor joints follow these angles exactly [rad].
     Replay(Spline3),
+    /// Constant motor torques at the joint outputs [N·m] (the zero-order hold of a
+    /// controller between two of its ticks).
+    Hold([f64; NM]),
 }
 
 impl Drive {
     /// True for replay.
     pub fn is_replay(&self) -> bool {
         matches!(self, Drive::Replay(_))
+    }
+
+    /// Motor torques at `t` for the torque-driven variants [N·m] (`None` in replay).
+    #[inline]
+    pub fn torque(&self, t: f64) -> Option<[f64; NM]> {
+        match self {
+            Drive::Torque(sig) => Some(sig.eval(t)),
+            Drive::Hold(tau) => Some(*tau),
+            Drive::Replay(_) => None,
+        }
     }
 }

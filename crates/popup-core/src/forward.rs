@@ -98,7 +98,7 @@ pub fn prescribe(model: &Model, drive: &Drive, t: f64, q: &mut VecN, v: &mut Vec
             }
             Some(am)
         }
-        Drive::Torque(_) => None,
+        Drive::Torque(_) | Drive::Hold(_) => None,
     }
 }
 
@@ -152,8 +152,8 @@ fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q:
         }
     }
     match (drive, am) {
-        (Drive::Torque(sig), _) => {
-            let tau = sig.eval(t);
+        (Drive::Torque(_) | Drive::Hold(_), _) => {
+            let tau = drive.torque(t).unwrap_or([0.0; 3]);
             let fr = fx.joint_friction.on();
             for (k, &i) in model.motor_idx.iter().enumerate() {
                 let lim = fx.actuator_saturation.tau_max[k];

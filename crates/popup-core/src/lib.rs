@@ -23,6 +23,7 @@ pub mod params;
 pub mod rollout;
 pub mod sensor;
 pub mod sim;
+pub mod control;
 pub mod spec;
 pub mod statics;
 

@@ -142,7 +142,7 @@ pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Resu
     Ok(())
 }
 
-fn diverged(model: &Model, k: usize, t: f64, q: &VecN, v: &VecN) -> Option<Error> {
+pub(crate) fn diverged(model: &Model, k: usize, t: f64, q: &VecN, v: &VecN) -> Option<Error> {
     let mut worst: Option<(usize, String)> = None;
     let mut vmax = 0.0;
     for i in 0..model.nv {
@@ -180,8 +180,8 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
             let (a, b) = s.span();
             (a, d.unwrap_or(b - a))
         }
-        (Drive::Torque(_), Some(d)) => (cfg.initial.map_or(0.0, |s| s.t), d),
-        (Drive::Torque(_), None) => return Err(Error::input("duration", "a torque-driven run needs a duration")),
+        (Drive::Torque(_) | Drive::Hold(_), Some(d)) => (cfg.initial.map_or(0.0, |s| s.t), d),
+        (Drive::Torque(_) | Drive::Hold(_), None) => return Err(Error::input("duration", "a torque-driven run needs a duration")),
     };
     if !(duration.is_finite() && duration >= 0.0) {
         return Err(Error::input("duration", format!("{duration} s must be finite and >= 0")));
@@ -220,7 +220,7 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
         None => {
             let qm = match &cfg.drive {
                 Drive::Replay(s) => s.eval(t0).0,
-                Drive::Torque(_) => [0.0; 3],
+                Drive::Torque(_) | Drive::Hold(_) => [0.0; 3],
             };
             rest_state(model, pd, t0, qm)?
         }
@@ -299,7 +299,7 @@ fn effect_drive(model: &Model, pd: &ParamData, drive: &Drive) -> Result<(Drive, 
     let gap = fx.backlash.gap;
     let delay = fx.sensor_delay.encoder;
     match drive {
-        Drive::Torque(_) if gap != [0.0; 3] => Err(Error::param(
+        Drive::Torque(_) | Drive::Hold(_) if gap != [0.0; 3] => Err(Error::param(
             "effects.backlash.gap",
             format!("{gap:?}"),
             "backlash needs encoder replay in this version (torque drive has no motor-side state until the motoreducer model of the controller issue)",
