@@ -30,6 +30,8 @@ from .io import MeasuredRun, read_run, write_run
 from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
 from .diagnosis import Diagnosis, History, Suspect, diagnose, improve
 from . import report, synth
+from . import control
+from .control import Controller, ControlBatch, ControlResult, Obstacle, Phase, Task
 
 __version__: str = _core.__version__
 build_profile: str = _core.BUILD_PROFILE
@@ -55,6 +57,13 @@ __all__ = [
     "Suspect",
     "report",
     "synth",
+    "control",
+    "Controller",
+    "Phase",
+    "Task",
+    "Obstacle",
+    "ControlResult",
+    "ControlBatch",
     "BatchResult",
     "WrinkleAlarm",
     "CHANNELS",

@@ -9,13 +9,16 @@ from __future__ import annotations
 
 import os
 import warnings as _warnings
-from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _core
 from .exceptions import InputError, PopupWarning
 from .results import BatchResult, SimResult, WrinkleAlarm
+
+if TYPE_CHECKING:
+    from .control import ControlBatch, ControlResult, Task
 
 __all__ = ["Arm", "RigidArm", "Model", "load_arm"]
 
@@ -472,3 +475,132 @@ class Model:
             alarms=[[WrinkleAlarm(*a) for a in al] for al in alarms],
             warnings=[list(w) for w in warns],
         )
+
+    # ------------------------------------------------------------ closed loop
+    def run_task(
+        self,
+        task: "Task",
+        *,
+        duration: float,
+        q0: Sequence[float] = (0.0, 0.0, 0.0),
+        sample_rate: float = 500.0,
+        payload_kg: Optional[float] = None,
+        pressure_pa: Optional[Sequence[float]] = None,
+        gains: Optional[Mapping[str, Any]] = None,
+        effects: Any = None,
+        check_step: bool = True,
+    ) -> "ControlResult":
+        """Run a closed-loop :class:`popup.control.Task` for ``duration`` [s] from rest at
+        motor angles ``q0`` [rad] (bending in static equilibrium, drives holding the arm).
+
+        The controller period 1/rate_hz must be a whole multiple of this model's ``dt``
+        (build the model with e.g. ``dt=1e-4`` for the default 10 kHz controller). A run that
+        goes unstable ends in the ``Unstable`` fault (``status == "unstable"``), not an
+        exception; bad tasks, unreachable Cartesian targets and unstable time steps raise.
+        """
+        b = self.rollout_task(
+            task,
+            duration=duration,
+            q0=np.asarray(q0, dtype=np.float64)[None, :] if np.ndim(q0) == 1 else q0,
+            sample_rate=sample_rate,
+            payload_kg=payload_kg,
+            pressure_pa=pressure_pa,
+            gains=None if gains is None else [gains],
+            effects=effects,
+            threads=1,
+            check_step=check_step,
+        )
+        return b[0]
+
+    def rollout_task(
+        self,
+        task: "Task",
+        *,
+        duration: float,
+        q0: Any = (0.0, 0.0, 0.0),
+        sample_rate: float = 500.0,
+        payload_kg: Any = None,
+        pressure_pa: Any = None,
+        gains: Any = None,
+        effects: Any = None,
+        threads: int = 0,
+        check_step: bool = True,
+        raise_on_error: bool = True,
+    ) -> "ControlBatch":
+        """Batched closed-loop runs of one task in parallel (GIL released), bit-identical to
+        one-by-one runs for any ``threads``.
+
+        Swept inputs take a leading batch axis (singletons are tiled): ``payload_kg ([B])``,
+        ``pressure_pa ([B] x 2)``, ``q0 ([B] x 3)``, ``effects ([B] x NE)``, and ``gains``:
+        a ``(B x NG)`` array in :data:`popup.control.GAIN_NAMES` order or a list of B
+        mappings such as ``{"vel_kp": 1000, "damp_kp": 0.04}`` (applied on top of the task's
+        controller gains). Gain studies are one call.
+        """
+        from .control import ControlBatch, Event, gains_to_flat
+
+        text = task.to_toml()
+        base, nph = _core.check_control(self._m, text, "<task>")
+        pay = np.array(self.payload_kg if payload_kg is None else payload_kg, dtype=np.float64).reshape(-1)
+        pres = np.array(self.pressure_pa if pressure_pa is None else pressure_pa, dtype=np.float64)
+        if pres.ndim not in (1, 2) or pres.shape[-1] != 2:
+            raise InputError(f"input pressure_pa: expected shape ([B] x 2) (link 1, link 2), got {pres.shape}")
+        q0a = np.asarray(q0, dtype=np.float64)
+        if q0a.ndim not in (1, 2) or q0a.shape[-1] != 3:
+            raise InputError(f"input q0: expected shape ([B] x 3) motor angles [rad], got {q0a.shape}")
+        if gains is None:
+            g = None
+        elif isinstance(gains, np.ndarray) and gains.ndim == 2:
+            g = np.asarray(gains, dtype=np.float64)
+        else:
+            g = np.stack([gains_to_flat(x, np.asarray(base)) for x in gains])
+        nb = max(pay.shape[0], pres.shape[0] if pres.ndim == 2 else 1, q0a.shape[0] if q0a.ndim == 2 else 1, 1 if g is None else g.shape[0])
+        if effects is not None and np.ndim(effects) == 2:
+            nb = max(nb, np.shape(effects)[0])
+        pay_b = np.full(nb, pay[0]) if pay.shape[0] == 1 else _tile("payload_kg", pay, nb, 0)
+        pres_b = _tile("pressure_pa", pres, nb, 1)
+        q0_b = _tile("q0", q0a, nb, 1)
+        g_b = np.tile(np.asarray(base), (nb, 1)) if g is None else _tile("gains", g, nb, 1)
+        fx_b = None if effects is None else np.ascontiguousarray(_tile("effects", np.asarray(effects, dtype=np.float64), nb, 1))
+        if not (np.isfinite(sample_rate) and sample_rate > 0):
+            raise InputError(f"input sample_rate: {sample_rate} Hz must be finite and > 0")
+        data, ctrl, errors, events, status, alarms, warns = _core.closed_loop_rollout(
+            self._m,
+            text,
+            np.ascontiguousarray(pay_b),
+            np.ascontiguousarray(pres_b),
+            np.ascontiguousarray(q0_b),
+            float(duration),
+            1.0 / float(sample_rate),
+            np.ascontiguousarray(g_b),
+            fx_b,
+            int(threads),
+            bool(check_step),
+            "<task>",
+        )
+        if raise_on_error:
+            for e in errors:
+                if e is not None:
+                    _core._raise(e[0], e[1])
+        seen = set()
+        for ws in warns:
+            for w in ws:
+                if w not in seen:
+                    seen.add(w)
+                    _warnings.warn(w, PopupWarning, stacklevel=3)
+        params = self.describe()
+        params.update({"payload_kg": pay_b, "pressure_pa": pres_b, "q0": q0_b, "task": text, "sample_rate_hz": float(sample_rate), "seed": None})
+        names = [p.name or p.kind.capitalize() for p in task.phases]
+        assert len(names) == nph
+        return ControlBatch(
+            data=np.asarray(data),
+            control=np.asarray(ctrl),
+            events=[[Event(*e) for e in ev] for ev in events],
+            status=list(status),
+            alarms=[[WrinkleAlarm(*a) for a in al] for al in alarms],
+            errors=[None if e is None else e[1] for e in errors],
+            gains=g_b,
+            phase_names=names,
+            params=params,
+            warnings=[list(w) for w in warns],
+        )
+

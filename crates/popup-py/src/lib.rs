@@ -4,6 +4,7 @@
 
 mod arm;
 mod cli;
+mod control;
 mod errors;
 mod model;
 
@@ -24,6 +25,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(model::effect_registry, m)?)?;
     m.add("EFFECT_NAMES", popup_core::effects::EFFECT_NAMES.to_vec())?;
     m.add_function(wrap_pyfunction!(cli::run_cli, m)?)?;
+    m.add_function(wrap_pyfunction!(control::closed_loop_rollout, m)?)?;
+    m.add_function(wrap_pyfunction!(control::check_control, m)?)?;
+    m.add_function(wrap_pyfunction!(control::control_channels, m)?)?;
+    m.add_function(wrap_pyfunction!(control::py_gain_names, m)?)?;
     m.add("__version__", popup_core::VERSION)?;
     m.add("BUILD_PROFILE", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("BUILD_FEATURES", popup_core::BUILD_FEATURES.to_vec())?;
