@@ -351,7 +351,10 @@ def compare(
     model : Model
         The model to test (e.g. ``run.model()`` for the declared experiment).
     run : MeasuredRun
-        From :func:`popup.read_run`. Only ``replay = "encoder"`` runs for now.
+        From :func:`popup.read_run`: ``replay = "encoder"`` (the motors follow the encoder
+        angles) or ``"reference"`` (closed loop: the controller of the run's ``[controller]``
+        table tracks ``ref_q1..3`` and the encoder angles are predicted too; the model's
+        ``dt`` must divide the controller period).
     channels : sequence of str, optional
         Channels to compare; default: every comparable channel (module docs).
     sample_rate : float, optional
@@ -365,7 +368,7 @@ def compare(
     Raises
     ------
     MeasuredRunError
-        A ``reference`` replay run, or no channel to compare.
+        An unknown replay mode, a bad ``[controller]`` table, or no channel to compare.
     """
     pd = _pd()
     if not isinstance(run, MeasuredRun):
@@ -375,16 +378,12 @@ def compare(
     L = int(lags)
     notes: List[str] = []
     where = str(run.data_file if run.data_file is not None else run.source)
-    if run.replay == "reference":
-        raise MeasuredRunError(
-            f"{where}: replay = \"reference\" needs a closed-loop replay (the model of the controller), "
-            "which arrives with the controller issue; compare an encoder replay (replay = \"encoder\") for now"
-        )
-    if run.replay != "encoder":
-        raise MeasuredRunError(f"{where}: unknown replay mode {run.replay!r}; expected \"encoder\"")
+    if run.replay not in ("encoder", "reference"):
+        raise MeasuredRunError(f"{where}: unknown replay mode {run.replay!r}; expected \"encoder\" or \"reference\"")
+    closed = run.replay == "reference"
 
     # ---- channels
-    chans = _select_channels(run, channels, where, notes)
+    chans = _select_channels(run, channels, where, notes, closed)
 
     # ---- declared experiment vs model
     if abs(float(model.payload_kg) - float(run.payload_kg)) > 0.0 or tuple(model.pressure_pa) != tuple(run.pressure_pa):
@@ -398,10 +397,11 @@ def compare(
 
     # ---- replay
     t_meas = run.time
-    t_enc, q_enc = run.encoder()
+    t_enc, q_enc = run.reference() if closed else run.encoder()
     n_skip_enc = len(t_meas) - len(t_enc)
     if n_skip_enc:
-        notes.append(f"encoder replay: {n_skip_enc} row(s) with a missing q1/q2/q3 skipped (the spline interpolates over them)")
+        what = "reference" if closed else "encoder"
+        notes.append(f"{what} replay: {n_skip_enc} row(s) with a missing {'ref_q' if closed else 'q'}1..3 skipped (interpolated over)")
     span = float(t_enc[-1] - t_enc[0])
     mean_dt = span / (len(t_enc) - 1)
     dt = model.dt
@@ -415,8 +415,17 @@ def compare(
     else:
         sr = float(sample_rate)
         notes.append(f"simulated at {sr:.6g} Hz (sample_rate given; the run's mean rate is {1.0 / mean_dt:.6g} Hz)")
-    iq, iv = _initial_state(model, run, q_enc[0], notes)
-    sim = model.replay(t_enc, q_enc, sample_rate=sr, initial_q=iq, initial_v=iv)
+    if closed:
+        task, q0, t0, dur = reference_setup(run)
+        notes.append(
+            f"closed-loop replay: the controller of the run's [controller] table tracks ref_q1..3 from rest at q = {np.round(q0, 6).tolist()} rad; "
+            "the encoder angles are predicted, not replayed"
+        )
+        sim = model.run_task(task, duration=dur, q0=q0, sample_rate=sr)
+        sim = _Shifted(sim, t0)
+    else:
+        iq, iv = _initial_state(model, run, q_enc[0], notes)
+        sim = model.replay(t_enc, q_enc, sample_rate=sr, initial_q=iq, initial_v=iv)
 
     # ---- align: simulation interpolated linearly onto the measured stamps
     t_sim = sim.time
@@ -643,7 +652,50 @@ def compare(
 # ---------------------------------------------------------------------------- helpers
 
 
-def _select_channels(run: MeasuredRun, channels: Optional[Sequence[str]], where: str, notes: List[str]) -> List[str]:
+class _Shifted:
+    """A closed-loop result (time from 0) seen on the run's clock (time from ``t0``)."""
+
+    def __init__(self, res: Any, t0: float) -> None:
+        self.res = res
+        self.t0 = float(t0)
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.res.time + self.t0
+
+    def channel(self, name: str) -> np.ndarray:
+        return self.time if name == "t" else self.res.channel(name)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.res, name)
+
+
+def reference_setup(run: MeasuredRun) -> Tuple[Any, np.ndarray, float, float]:
+    """The closed-loop replay of a ``replay = "reference"`` run: ``(task, q0 [rad], t0 [s],
+    duration [s])``. The task is one phase tracking the measured references (linear
+    interpolation) with the controller of the run's ``[controller]`` table; the run starts at
+    rest at the first encoder sample (the first reference sample when q1..q3 are absent)."""
+    from .control import Controller, Phase, Task, samples
+
+    t_ref, q_ref = run.reference()
+    where = str(run.source)
+    ctl = dict(run.controller or {})
+    try:
+        controller = Controller(**ctl)
+    except TypeError as e:
+        raise MeasuredRunError(f"{where}: [controller] table: {e} (keys: rate_hz, gains, motor, motors, damping, damping_lpf_rad_s, v_max, anti_windup)") from None
+    t0 = float(t_ref[0])
+    task = Task([Phase("moving", name="Replay", track=[samples(t_ref - t0, q_ref[:, j]) for j in range(3)], until={"max_time": math.inf})], controller, faults={"wrinkle": "continue"})
+    q0 = q_ref[0]
+    if all(c in run.columns for c in ("q1", "q2", "q3")):
+        q = np.column_stack([run.channel(c) for c in ("q1", "q2", "q3")])
+        ok = np.all(np.isfinite(q), axis=1)
+        if ok.any():
+            q0 = q[int(np.argmax(ok))]
+    return task, np.asarray(q0, dtype=np.float64), t0, float(t_ref[-1] - t0)
+
+
+def _select_channels(run: MeasuredRun, channels: Optional[Sequence[str]], where: str, notes: List[str], closed: bool = False) -> List[str]:
     have = [c for c in run.columns if c in CHANNELS and c != "t"]
     if channels is not None:
         chans = [str(c) for c in channels]
@@ -656,6 +708,8 @@ def _select_channels(run: MeasuredRun, channels: Optional[Sequence[str]], where:
         if not chans:
             raise MeasuredRunError(f"{where}: channels=[] selects nothing to compare; comparable: {have}")
         for c in chans:
+            if closed:
+                continue
             if c in _INPUTS_ENCODER:
                 notes.append(f"{c} is an input of the encoder replay: it matches by construction (up to the spline)")
             if c in _DERIVED:
@@ -664,7 +718,7 @@ def _select_channels(run: MeasuredRun, channels: Optional[Sequence[str]], where:
     chans = []
     skipped = []
     for c in have:
-        if c in _INPUTS_ENCODER or c in _DERIVED:
+        if not closed and (c in _INPUTS_ENCODER or c in _DERIVED):
             skipped.append(c)
             continue
         y = run.channel(c)

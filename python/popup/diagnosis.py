@@ -154,11 +154,17 @@ class _Problem:
         self.sample_rate = float(sample_rate)
         self.threads = int(threads)
         self.t_meas = run.time
-        self.t_enc, self.q_enc = run.encoder()
         notes: List[str] = []
-        from .compare import _initial_state
+        from .compare import _initial_state, reference_setup
 
-        self.iq, self.iv = _initial_state(model, run, self.q_enc[0], notes)
+        self.closed = run.replay == "reference"
+        if self.closed:
+            # the references stand in for the encoder angles in the evidence statistics
+            self.t_enc, self.q_enc = run.reference()
+            self.task, self.q0, self.t0, self.duration = reference_setup(run)
+        else:
+            self.t_enc, self.q_enc = run.encoder()
+            self.iq, self.iv = _initial_state(model, run, self.q_enc[0], notes)
         Y = np.column_stack([run.channel(c) for c in self.channels])
         self.std = np.array([float(np.nanstd(Y[:, j])) or 1.0 for j in range(Y.shape[1])])
         self.Y = Y
@@ -168,21 +174,36 @@ class _Problem:
         """Simulated channels on the measured stamps, (B, n, C)."""
         m = self.model if model is None else model
         flats = np.atleast_2d(flats)
-        res = m.rollout(
-            encoder_t=self.t_enc,
-            encoder_q=self.q_enc,
-            initial_q=self.iq,
-            initial_v=self.iv,
-            sample_rate=self.sample_rate,
-            threads=self.threads,
-            effects=flats,
-            raise_on_error=False,
-        )
+        res: Any
+        if self.closed:
+            res = m.rollout_task(
+                self.task,
+                duration=self.duration,
+                q0=self.q0,
+                sample_rate=self.sample_rate,
+                threads=self.threads,
+                effects=flats,
+                raise_on_error=False,
+            )
+            ok = np.array([e is None and st == "completed" for e, st in zip(res.errors, res.status)])
+            t0 = self.t0
+        else:
+            res = m.rollout(
+                encoder_t=self.t_enc,
+                encoder_q=self.q_enc,
+                initial_q=self.iq,
+                initial_v=self.iv,
+                sample_rate=self.sample_rate,
+                threads=self.threads,
+                effects=flats,
+                raise_on_error=False,
+            )
+            ok = np.asarray(res.ok)
+            t0 = 0.0
         self.nfev += flats.shape[0]
-        ok = np.asarray(res.ok)
         if not ok.any():
             return np.full((flats.shape[0], len(self.t_meas), len(self.channels)), np.nan)
-        t_sim = res.time[int(np.argmax(ok))]
+        t_sim = res.time[int(np.argmax(ok))] + t0
         out = np.full((flats.shape[0], len(self.t_meas), len(self.channels)), np.nan)
         same = len(t_sim) == len(self.t_meas) and np.array_equal(t_sim, self.t_meas)
         inside = (self.t_meas >= t_sim[0] - 1e-12) & (self.t_meas <= t_sim[-1] + 1e-12)

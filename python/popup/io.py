@@ -245,7 +245,8 @@ class MeasuredRun:
         """A :class:`~popup.Model` of the declared experiment: the run's arm,
         ``payload_kg`` [kg], ``pressure_pa`` [Pa] and ``gravity``. Keyword arguments go
         to :class:`~popup.Model` (``dt``, ``integrator``, ``disable``, or a
-        ``payload_kg``/``pressure_pa``/``gravity`` that overrides the declared one)."""
+        ``payload_kg``/``pressure_pa``/``gravity`` that overrides the declared one). For
+        ``replay = "reference"`` the default ``dt`` is the controller period."""
         from .model import Model
 
         args: Dict[str, Any] = {
@@ -253,6 +254,9 @@ class MeasuredRun:
             "pressure_pa": self.pressure_pa,
             "gravity": self.gravity,
         }
+        if self.replay == "reference" and "dt" not in kwargs:
+            # the controller period must be a whole multiple of the physics step
+            args["dt"] = 1.0 / float((self.controller or {}).get("rate_hz", 10_000.0))
         args.update(kwargs)
         arm = args.pop("arm", self.arm_source)
         return Model(arm, **args)
@@ -953,10 +957,17 @@ def from_sim(result: SimResult, **experiment_overrides: Any) -> "pd.DataFrame":
         popup.io.write_run("runs/step", df.attrs["experiment"], df)
     """
     pd = _pd()
+    from .control import ControlResult
+
     data = np.asarray(getattr(result, "data", None))
-    if not isinstance(result, SimResult) or data.ndim != 2:
-        raise TypeError(f"from_sim: expected one simulated run (popup.SimResult), got {type(result).__name__}; for a batch use batch[b]")
+    closed = isinstance(result, ControlResult)
+    if not (isinstance(result, SimResult) or closed) or data.ndim != 2:
+        raise TypeError(f"from_sim: expected one simulated run (popup.SimResult or popup.ControlResult), got {type(result).__name__}; for a batch use batch[b]")
     cols = [c for c in MEASURED_COLUMNS if c in CHANNELS]
     df = pd.DataFrame({c: np.array(result.channel(c), dtype=np.float64) for c in cols})
+    if closed:
+        for j in range(3):
+            df[f"ref_q{j + 1}"] = np.array(result.ref_q[:, j], dtype=np.float64)
+        experiment_overrides = {"replay": "reference", **experiment_overrides}
     df.attrs["experiment"] = sim_experiment(result, **experiment_overrides)
     return df

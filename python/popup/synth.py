@@ -19,7 +19,7 @@ import numpy as np
 
 from .io import MeasuredRun, from_sim, read_run, write_run
 
-__all__ = ["lab_trajectory", "measured_run", "NOISE", "ENCODER_RESOLUTION"]
+__all__ = ["lab_trajectory", "measured_run", "reference_run", "NOISE", "ENCODER_RESOLUTION"]
 
 #: Default sensor noise (standard deviation, white Gaussian) per channel group, SI units.
 NOISE: Dict[str, float] = {"tau": 0.05, "ee": 2e-4, "imu": 0.02}
@@ -138,3 +138,54 @@ def measured_run(
     )
     write_run(path, exp, df, overwrite=overwrite)
     return read_run(path)
+
+
+def reference_run(
+    truth: Any,
+    t: np.ndarray,
+    ref_q: np.ndarray,
+    path: Union[str, "os.PathLike[str]"],
+    *,
+    controller: Any = None,
+    seed: int = 0,
+    noise: Optional[Mapping[str, float]] = None,
+    encoder_resolution: Optional[float] = ENCODER_RESOLUTION,
+    description: str = "",
+    overwrite: bool = True,
+) -> MeasuredRun:
+    """A synthetic ``replay = "reference"`` run: ``truth`` (a :class:`popup.Model` whose
+    ``dt`` divides the controller period, possibly with hidden effects) runs closed loop
+    tracking the position references ``ref_q`` (N, 3) [rad] given at ``t`` (N,) [s] with
+    ``controller`` (a :class:`popup.control.Controller`; default thesis gains) from rest at
+    ``ref_q[0]``; sensor noise and encoder quantisation as :func:`measured_run`. The run
+    declares the controller in its ``[controller]`` table and the references as
+    ``ref_q1..3``; the hidden effects only in its description."""
+    from .control import Controller, Phase, Task, samples
+
+    rng = np.random.default_rng(seed)
+    t = np.asarray(t, dtype=np.float64)
+    ref_q = np.asarray(ref_q, dtype=np.float64)
+    ctl = controller if controller is not None else Controller()
+    task = Task([Phase("moving", name="Replay", track=[samples(t - t[0], ref_q[:, j]) for j in range(3)], until={"max_time": math.inf})], ctl, faults={"wrinkle": "continue"})
+    rate = float(round(1.0 / float(np.median(np.diff(t)))))
+    res = truth.run_task(task, duration=float(t[-1] - t[0]), q0=ref_q[0], sample_rate=rate)
+    df = from_sim(res)
+    df["t"] = df["t"].to_numpy() + t[0]
+    nz = dict(NOISE if noise is None else noise)
+    for c in df.columns:
+        grp = "tau" if c.startswith("tau") else "ee" if c.startswith("ee_") else "imu" if c.startswith("imu") else None
+        s = nz.get(grp, 0.0) if grp else 0.0
+        if s > 0:
+            df[c] = df[c].to_numpy() + rng.normal(0.0, s, len(df))
+    if encoder_resolution:
+        for j in range(3):
+            df[f"q{j + 1}"] = np.round(df[f"q{j + 1}"].to_numpy() / encoder_resolution) * encoder_resolution
+    df = df.drop(columns=[c for c in ("dq1", "dq2", "dq3") if c in df.columns])
+    exp = df.attrs["experiment"]
+    exp["controller"] = ctl.to_dict()
+    exp["description"] = (description + " " if description else "") + (
+        f"synthetic closed-loop run (seed {seed}); hidden effects: {truth.effects if truth.effects else 'none'}"
+    )
+    write_run(path, exp, df, overwrite=overwrite)
+    return read_run(path)
+
