@@ -6,7 +6,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, final
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "EFFECT_NAMES", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
+__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "closed_loop_rollout", "check_control", "control_channels", "gain_names", "EFFECT_NAMES", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
 
 __version__: str
 BUILD_PROFILE: str
@@ -17,6 +17,31 @@ _F = npt.NDArray[np.float64]
 def _raise(cls: str, msg: str) -> None: ...
 def run_cli(argv: Sequence[str]) -> int: ...
 def effect_registry() -> List[Tuple[str, str, str, int, float, float, float, bool, bool, str]]: ...
+def control_channels() -> List[str]: ...
+def gain_names() -> List[str]: ...
+def check_control(model: Model, text: str, source: str = "<control>") -> Tuple[List[float], int]: ...
+def closed_loop_rollout(
+    model: Model,
+    text: str,
+    payload_kg: npt.NDArray[np.float64],
+    pressure_pa: npt.NDArray[np.float64],
+    q0: npt.NDArray[np.float64],
+    duration: float,
+    sample_period: float,
+    gains: Optional[npt.NDArray[np.float64]] = None,
+    effects: Optional[npt.NDArray[np.float64]] = None,
+    threads: int = 0,
+    check_step: bool = True,
+    source: str = "<control>",
+) -> Tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    List[Optional[Tuple[str, str]]],
+    List[List[Tuple[float, str, str, str, str]]],
+    List[str],
+    List[List[Tuple[int, float, float, float]]],
+    List[List[str]],
+]: ...
 
 EFFECT_NAMES: List[str]
 

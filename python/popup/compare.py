@@ -415,13 +415,14 @@ def compare(
     else:
         sr = float(sample_rate)
         notes.append(f"simulated at {sr:.6g} Hz (sample_rate given; the run's mean rate is {1.0 / mean_dt:.6g} Hz)")
+    sim: Any
     if closed:
         task, q0, t0, dur = reference_setup(run)
         notes.append(
             f"closed-loop replay: the controller of the run's [controller] table tracks ref_q1..3 from rest at q = {np.round(q0, 6).tolist()} rad; "
             "the encoder angles are predicted, not replayed"
         )
-        sim = model.run_task(task, duration=dur, q0=q0, sample_rate=sr)
+        sim = model.run_task(task, duration=dur, q0=q0.tolist(), sample_rate=sr)
         sim = _Shifted(sim, t0)
     else:
         iq, iv = _initial_state(model, run, q_enc[0], notes)

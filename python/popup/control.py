@@ -520,7 +520,7 @@ class ControlBatch(_Control):
 
         rows = []
         for b in range(len(self)):
-            r = {"payload_kg": float(self.params["payload_kg"][b]), "p1": float(self.params["pressure_pa"][b][0]), "p2": float(self.params["pressure_pa"][b][1])}
+            r: Dict[str, Any] = {"payload_kg": float(self.params["payload_kg"][b]), "p1": float(self.params["pressure_pa"][b][0]), "p2": float(self.params["pressure_pa"][b][1])}
             r.update({n: float(v) for n, v in zip(GAIN_NAMES, self.gains[b])})
             r.update(_metrics(self.data[b]))
             r.update({"status": self.status[b], "n_alarms": len(self.alarms[b]), "error": self.errors[b]})

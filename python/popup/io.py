@@ -967,7 +967,7 @@ def from_sim(result: SimResult, **experiment_overrides: Any) -> "pd.DataFrame":
     df = pd.DataFrame({c: np.array(result.channel(c), dtype=np.float64) for c in cols})
     if closed:
         for j in range(3):
-            df[f"ref_q{j + 1}"] = np.array(result.ref_q[:, j], dtype=np.float64)
+            df[f"ref_q{j + 1}"] = np.array(result.ref_q[:, j], dtype=np.float64)  # type: ignore[attr-defined]
         experiment_overrides = {"replay": "reference", **experiment_overrides}
     df.attrs["experiment"] = sim_experiment(result, **experiment_overrides)
     return df
