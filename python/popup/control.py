@@ -313,13 +313,14 @@ class Task:
 
     @staticmethod
     def from_toml(source: Union[str, Path]) -> "Task":
-        """Read a task from TOML text or a file path (checked by the core when run)."""
+        """Read a task from TOML text or a file path. The text is checked by the core's
+        parser first: an unknown key or a bad value raises :class:`popup.InputError` (or
+        :class:`popup.ParameterError`) naming the file, line and key."""
         p = Path(source) if not isinstance(source, str) or ("\n" not in source and source.endswith(".toml")) else None
         text = p.read_text() if p is not None else str(source)
-        try:
-            d = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as e:
-            raise InputError(f"input {p or '<task>'}: {e}") from None
+        # the core's parser checks keys and values and names the line and key
+        _core.check_control(_default_core_model(), text, str(p or "<task>"))
+        d = tomllib.loads(text)
         c = dict(d.get("controller", {}))
         ctrl = Controller(**{k: v for k, v in c.items()})
         phases = []
