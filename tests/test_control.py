@@ -169,3 +169,26 @@ def test_actuator_saturation_is_diagnosable_in_closed_loop(tmp_path):
     e_truth, _ = model_error(m.with_effect("actuator_saturation", tau_max=[1e9, tau_true, 1e9]), run)
     assert top.error_after <= 1.05 * e_truth
     assert top.error_after < 0.6 * d.nominal_error
+
+
+def test_thesis_scenarios_quick(tmp_path):
+    """examples/thesis_scenarios.py (quick mode): damping lowers the RMS bending in every
+    chapter-7 scenario, the thesis's chapter-8 target is refused, the table is written."""
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "examples" / "thesis_scenarios.py"
+    spec = importlib.util.spec_from_file_location("thesis_scenarios", path)
+    ts = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ts)
+    df = ts.run(tmp_path, quick=True)
+    sc = df["scenario"].astype(str)
+    for s in "1234567":
+        g = df[sc == s]
+        off = float(g[g["damping"] == "off"]["rms_bending_rad"].iloc[0])
+        on = float(g[g["damping"] == "on"]["rms_bending_rad"].iloc[0])
+        assert on < 0.85 * off, (s, off, on)
+    assert "UnreachableError" in str(df[sc == "8-thesis"]["status"].iloc[0])
+    assert (df[sc.str.match(r"^[1-8][abc]?$")]["status"] == "completed").all()
+    text = (tmp_path / "table.md").read_text()
+    assert "## Claims" in text and (tmp_path / "bending.png").exists()

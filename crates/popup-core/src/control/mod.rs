@@ -49,14 +49,15 @@ pub struct Gains {
 
 impl Default for Gains {
     /// Thesis chapter 7: position Kp = 20, Ki = 0.25; velocity Kp = 5000, Ki = 100; damping
-    /// PIDs as tuned in `docs/control.md`; Cartesian gain 4.
+    /// proportional gains 0.01 (joint 1) and 0.04 (joints 2, 3) as tuned in
+    /// `docs/control.md`; Cartesian gain 4.
     fn default() -> Self {
         Gains {
             pos_kp: [20.0; 3],
             pos_ki: [0.25; 3],
             vel_kp: [5000.0; 3],
             vel_ki: [100.0; 3],
-            damp_kp: [0.04; 3],
+            damp_kp: [0.01, 0.04, 0.04],
             damp_ki: [0.0; 3],
             damp_kd: [0.0; 3],
             cart_k: 4.0,
