@@ -176,10 +176,12 @@ def test_thesis_scenarios_quick(tmp_path):
     chapter-7 scenario, the thesis's chapter-8 target is refused, the table is written."""
     import importlib.util
     import pathlib
+    import sys
 
     path = pathlib.Path(__file__).resolve().parents[1] / "examples" / "thesis_scenarios.py"
     spec = importlib.util.spec_from_file_location("thesis_scenarios", path)
     ts = importlib.util.module_from_spec(spec)
+    sys.modules["thesis_scenarios"] = ts  # its dataclasses look their module up
     spec.loader.exec_module(ts)
     df = ts.run(tmp_path, quick=True)
     sc = df["scenario"].astype(str)
