@@ -218,6 +218,8 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
     let mut ws = Workspace::new();
     let mut drive = Drive::Hold(tau);
     let mut status = Status::Completed;
+    // |M|/M_w > 1 on either link at the previous controller tick (onset of `continue` alarms)
+    let mut wrinkled_prev = false;
 
     let phase_name = |cur: usize, fault: &Option<Fault>| -> String {
         match fault {
@@ -293,6 +295,7 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
             // joint 1: lateral (z) difference of the two links; joints 2, 3: in-plane (y) of links 1, 2
             let sig = [arel[0].z - arel[1].z, arel[0].y, arel[1].y];
             let (_, ratio) = bending_moments(model, &pd, t, &st.q, &st.v);
+            let wrinkled = ratio[0] > 1.0 || ratio[1] > 1.0;
             // collision
             let np = arm_parts(model, &fr, payload_now, cfg.payload_radius, &mut parts, &mut part_link);
             let closest = world.distances(&parts[..np], &mut dist[..np])?;
@@ -343,7 +346,7 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
                     if action == FaultAction::Continue {
                         // log the onset of each episode only
                         let onset = match kind {
-                            0 => open[0].is_none() && open[1].is_none(),
+                            0 => !wrinkled_prev,
                             1 => sat_ticks.iter().any(|&s| s == sat_limit.max(1)),
                             _ => events.last().map_or(true, |e| e.kind != "contact" || t - e.t > pol.clear_time),
                         };
@@ -388,6 +391,8 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
                     }
                 }
             }
+
+            wrinkled_prev = wrinkled;
 
             // ---- references ----
             let ph = &phases[cur];

@@ -113,9 +113,11 @@ mod tests {
         let (u, sat) = pi.step(&mut i, 5.0, 0.01);
         assert_eq!((u, sat), (1.0, true));
         assert!((i - 0.01).abs() < 1e-15);
-        // saturated but error reversing: integrates again
-        let (_, _) = pi.step(&mut i, -5.0, 0.01);
-        assert!((i - (0.01 - 0.5)).abs() < 1e-15);
+        // saturated high but the error reversing: integrates (unwinds)
+        let mut i = 2.0;
+        let (u, sat) = pi.step(&mut i, -0.1, 0.01);
+        assert_eq!((u, sat), (1.0, true));
+        assert!((i - (2.0 - 0.01)).abs() < 1e-15);
     }
 
     #[test]
