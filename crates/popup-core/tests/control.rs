@@ -676,3 +676,42 @@ fn cartesian_control_reaches_target() {
         assert!((q - q_goal[k]).abs() < 0.02, "q{} = {q} vs {}", k + 1, q_goal[k]);
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// current loop
+
+/// The current loop is the exact ZOH discretisation of a first-order lag: with ω_i finite
+/// the q1 rate (arm straight up: a pure inertia) is the PI + lag + inertia recursion to
+/// round-off, and it differs visibly from the ideal-drive recursion.
+#[test]
+fn current_loop_lag_matches_discrete_design() {
+    let m = model(false);
+    let p = params(0.0, 90e3);
+    let j = joint_inertia(&m, &p, 0);
+    let wi = 150.0;
+    let cu = Motoreducer::DEFAULT.torque_per_unit;
+    let tp = ControllerSpec::default().period();
+    let (kp, ki) = (40.0 * j / cu, 0.0);
+    let duration = 0.3;
+    let sig = [Signal::Step { from: 0.0, to: 0.2, delay: 0.0 }, cst(0.0), cst(0.0)];
+    let mut cl = ClosedLoop::single(Command::Velocity(sig), [0.0, FRAC_PI_2, 0.0], duration, DT);
+    cl.controller.motors = [Motoreducer { current_bandwidth: wi, ..ideal() }; 3];
+    cl.controller.gains.vel_kp[0] = kp;
+    cl.controller.gains.vel_ki[0] = ki;
+    let r = run_closed_loop(&m, &p, &cl).unwrap();
+    let v = dcol(&r, "dq1");
+    let n = (duration / tp).round() as usize;
+    let alpha = 1.0 - (-wi * tp).exp();
+    let (mut vv, mut tau) = (0.0, 0.0);
+    let mut want = Vec::with_capacity(n + 1);
+    for _ in 0..=n {
+        want.push(vv);
+        tau += alpha * (cu * kp * (0.2 - vv) - tau);
+        vv += tp / j * tau;
+    }
+    let err = max_abs_diff(&v, &want);
+    let ideal_err = max_abs_diff(&v, &pi_inertia(kp, ki, cu, j, tp, 0.2, n));
+    eprintln!("current loop ω_i = {wi}: |v − design| = {err:e}, |v − ideal-drive design| = {ideal_err:e}");
+    assert!(err < 1e-12, "q1 rate differs from the PI + current-loop lag design by {err:e} rad/s");
+    assert!(ideal_err > 0.01, "the lag must show against the ideal drive ({ideal_err:e})");
+}
