@@ -194,3 +194,28 @@ def test_thesis_scenarios_quick(tmp_path):
     assert (df[sc.str.match(r"^[1-8][abc]?$")]["status"] == "completed").all()
     text = (tmp_path / "table.md").read_text()
     assert "## Claims" in text and (tmp_path / "bending.png").exists()
+
+
+def _example(name):
+    import importlib.util
+    import pathlib
+    import sys
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "examples" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_motoreducer_defaults_reproduce_thesis_cutoffs():
+    """Thesis Tables 5–8: velocity-loop cut-off 707 / 151 / 49 rad/s at 0.1 / 1 / 3 rad/s
+    amplitude (Kp = 5000), one link – one motoreducer, with the library's defaults."""
+    fm = _example("fit_motoreducer")
+    model = fm.make_model()
+    got = fm.cutoffs(model, {}, list(fm.THESIS))
+    for a, want in fm.THESIS.items():
+        assert got[a].first == pytest.approx(want, rel=0.05), (a, got[a])
+    # the torque limit makes the cut-off fall as 1/amplitude at large amplitude
+    assert got[1.0].first * 1.0 == pytest.approx(got[3.0].first * 3.0, rel=0.1)

@@ -631,7 +631,14 @@ def _x0(prob: _Problem, free: List[Tuple[fx.EffectParam, int]], base_flat: np.nd
         if p.effect == "actuator_saturation":
             c = f"tau{i + 1}"
             if c in prob.channels:
-                v = float(np.nanmax(np.abs(prob.Y[:, prob.channels.index(c)])))
+                # the plateau of the measured |torque|: the median of the samples within
+                # 4 noise deviations of the peak (the peak itself is biased up by the noise;
+                # in closed loop a limit 1 % high already changes the whole trajectory)
+                y = np.abs(prob.Y[:, prob.channels.index(c)])
+                y = y[np.isfinite(y)]
+                sd = float(np.std(np.diff(y))) / math.sqrt(2.0) if y.size > 2 else 0.0
+                top = y[y >= float(np.max(y)) - 4.0 * sd]
+                v = float(np.median(top))
             else:
                 v = 1e3
         elif p.effect == "torsion" and p.name == "k_t" and not math.isfinite(v):
@@ -649,6 +656,14 @@ def _best_seed(prob: _Problem, effect: str, free: List[Tuple[fx.EffectParam, int
             if p.name in seed:
                 x[j] = min(max(seed[p.name], p.lower), p.upper)
         cands.append(x)
+    if effect == "actuator_saturation":
+        # x0 puts every limit at its joint's measured peak; a joint that never saturated is
+        # better left unlimited (its peak is only clipped by noise), so also try each joint
+        # limited alone (the objective is flat above a peak: the fit cannot find this itself)
+        for k in range(len(free)):
+            x = np.full_like(x0, 1e3)
+            x[k] = x0[k]
+            cands.append(x)
     if len(cands) == 1:
         return x0
     idx = np.array([p.offset + i for p, i in free])

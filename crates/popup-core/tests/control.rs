@@ -259,11 +259,11 @@ fn saturated_run(cl: &ClosedLoop, channel: &str, target: f64, tau_max: f64) -> (
 fn anti_windup_limits_overshoot_under_saturation() {
     let tau_max = 3.0;
     // (a) position PI (Kp_q = 4, Ki_q = 2) around the default velocity loop: 0.5 rad step on q3
-    // (2 kg, 30 kPa, gravity off). The drive saturates for ≈ 0.6 s; with anti-windup the position
+    // (2 kg, 30 kPa, gravity off). The drive saturates for ≈ 1 s; with anti-windup the position
     // integrator is frozen meanwhile.
     let pos = |aw: bool| {
         let cmd = Command::Track([cst(0.0), cst(FRAC_PI_2), Signal::Step { from: 0.0, to: 0.5, delay: 0.0 }]);
-        let mut cl = ClosedLoop::single(cmd, [0.0, FRAC_PI_2, 0.0], 4.0, 1e-3);
+        let mut cl = ClosedLoop::single(cmd, [0.0, FRAC_PI_2, 0.0], 6.0, 1e-3);
         cl.controller.motors[2].tau_max = tau_max;
         cl.controller.gains.pos_kp[2] = 4.0;
         cl.controller.gains.pos_ki[2] = 2.0;
@@ -274,7 +274,7 @@ fn anti_windup_limits_overshoot_under_saturation() {
     // 1 rad/s on q3; the drive saturates while accelerating the arm.
     let vel = |aw: bool| {
         let cmd = Command::Velocity([cst(0.0), cst(0.0), Signal::Step { from: 0.0, to: 1.0, delay: 0.0 }]);
-        let mut cl = ClosedLoop::single(cmd, [0.0, FRAC_PI_2, 0.0], 1.5, 1e-3);
+        let mut cl = ClosedLoop::single(cmd, [0.0, FRAC_PI_2, 0.0], 3.0, 1e-3);
         cl.controller.motors[2].tau_max = tau_max;
         cl.controller.gains.vel_kp[2] = 500.0;
         cl.controller.gains.vel_ki[2] = 5000.0;
@@ -542,9 +542,10 @@ fn closed_loop_is_bit_identical() {
 fn absurd_gain_ends_in_unstable_fault() {
     let m = model(true);
     let p = Params::defaults(&m);
-    let mut cl = ClosedLoop::single(Command::Hold, [0.0, FRAC_PI_2, 0.0], 1.0, 1e-3);
+    let cmd = Command::Track([cst(0.0), cst(FRAC_PI_2), Signal::Step { from: 0.0, to: 0.01, delay: 0.01 }]);
+    let mut cl = ClosedLoop::single(cmd, [0.0, FRAC_PI_2, 0.0], 1.0, 1e-3);
     cl.controller.motors = [ideal(); 3];
-    cl.controller.gains.vel_kp[2] = 1e6;
+    cl.controller.gains.vel_kp[2] = 1e7;
     let r = run_closed_loop(&m, &p, &cl).expect("an unstable run is not an error");
     assert_eq!(r.status, Status::Unstable);
     let e = r.events.last().unwrap();

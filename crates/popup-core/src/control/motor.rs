@@ -32,7 +32,7 @@ impl Motoreducer {
     /// The defaults fitted to the thesis's Tables 5–9 (see `docs/control.md`,
     /// "Motoreducer fit"): a shared motoreducer on all three joints.
     pub const DEFAULT: Motoreducer =
-        Motoreducer { gear_ratio: 100.0, torque_per_unit: 0.1157, tau_max: 123.0, current_bandwidth: 6283.0, encoder_counts: 4096 };
+        Motoreducer { gear_ratio: 100.0, torque_per_unit: 0.1014, tau_max: 66.83, current_bandwidth: 6283.0, encoder_counts: 4096 };
 
     /// Joint-side encoder resolution [rad] (0 for an ideal encoder).
     pub fn resolution(&self) -> f64 {

@@ -318,7 +318,7 @@ impl ArmSpec {
                 imu: vec![SensorMount { body: 4, position_m: [0.0; 3] }, SensorMount { body: 7, position_m: [0.0; 3] }],
                 end_effector: SensorMount { body: 7, position_m: [0.0; 3] },
             },
-            motors: MotorSpec { armature_kgm2: [0.05; 3] },
+            motors: MotorSpec { armature_kgm2: [0.8; 3] },
             rigid: RigidSpec {
                 as_built: RigidTable { d: [0.15, 0.05, -0.12], a: [0.0, 0.745, 0.685], alpha: [FRAC_PI_2, 0.0, 0.0], theta_offset: [0.0; 3] },
                 ik: RigidTable { d: [0.0; 3], a: [0.0, 0.745, 0.685], alpha: [FRAC_PI_2, 0.0, 0.0], theta_offset: [0.0; 3] },
