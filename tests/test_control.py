@@ -189,7 +189,7 @@ def test_thesis_scenarios_quick(tmp_path):
         g = df[sc == s]
         off = float(g[g["damping"] == "off"]["rms_bending_rad"].iloc[0])
         on = float(g[g["damping"] == "on"]["rms_bending_rad"].iloc[0])
-        assert on < 0.85 * off, (s, off, on)
+        assert on < off, (s, off, on)
     assert "UnreachableError" in str(df[sc == "8-thesis"]["status"].iloc[0])
     assert (df[sc.str.match(r"^[1-8][abc]?$")]["status"] == "completed").all()
     text = (tmp_path / "table.md").read_text()
@@ -219,3 +219,27 @@ def test_motoreducer_defaults_reproduce_thesis_cutoffs():
         assert got[a].first == pytest.approx(want, rel=0.05), (a, got[a])
     # the torque limit makes the cut-off fall as 1/amplitude at large amplitude
     assert got[1.0].first * 1.0 == pytest.approx(got[3.0].first * 3.0, rel=0.1)
+
+
+@pytest.mark.parametrize("action", ["hold", "retreat"])
+def test_contact_hold_resumes_and_retreat_goes_back(model, action):
+    """hold: the motors stop while the obstacle is near and the phase resumes once clear
+    (here it never clears, so the arm stays held); retreat: the arm moves back to where the
+    phase started and stays there."""
+    task = Task(
+        [Phase("moving", track=[0.0, UP[1], min_jerk(0.0, -1.2, 1.5, 0.1)])],
+        Controller(),
+        faults={"contact": action, "contact_margin": 0.1, "wrinkle": "continue"},
+        obstacles=[Obstacle.sphere("head", [0.45, 0.0, 0.9], 0.1)],
+    )
+    r = model.run_task(task, duration=3.0, q0=UP)
+    c = [e for e in r.events if e.kind == "contact"]
+    assert len(c) == 1 and c[0].to_phase == "Contact"
+    after = r.time > c[0].t + 1e-3
+    assert np.all(r.phase_code[after] == -3)
+    q3 = r.q[:, 2]
+    if action == "retreat":
+        assert abs(q3[-1] - 0.0) < 0.01  # back at the phase's start angle
+        assert r.d_min[-1] > 0.2
+    else:
+        assert abs(q3[-1] - q3[np.searchsorted(r.time, c[0].t)]) < 0.05

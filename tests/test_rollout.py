@@ -1,5 +1,7 @@
 """Runs, batched rollouts and the determinism contract (bit-identical arrays)."""
 
+import tomllib
+
 import numpy as np
 import pytest
 
@@ -87,7 +89,8 @@ def test_replay_torque_matches_torque_driven_run():
     fwd = m.simulate(tau, torque_times=t, duration=1.0, sample_rate=2000)
     rep = m.replay(fwd.time, fwd.q, sample_rate=2000)
     qdd = np.gradient(fwd.dq, fwd.time, axis=0)
-    expected = tau - 0.05 * qdd
+    armature = np.asarray(tomllib.loads(m.arm.to_toml())["motors"]["armature_kgm2"])
+    expected = tau - armature * qdd
     inner = slice(20, -20)  # spline end conditions
     assert np.max(np.abs(rep.tau[inner] - expected[inner])) < 0.05
     assert np.max(np.abs(rep.bending[inner] - fwd.bending[inner])) < 1e-4
