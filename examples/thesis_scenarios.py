@@ -31,7 +31,7 @@ id    scenario
 
 Chapter 7 runs carry a 2 kg payload (the model default); all run at 30 kPa, physics step
 dt = 1e-4 s, controller at 10 kHz with the thesis's cascade gains (position Kp 20, Ki 0.25;
-velocity Kp 5000, Ki 100 in chapter 7), the motoreducer torque limit 123 N·m and the fault
+velocity Kp 5000, Ki 100 in chapter 7), the motoreducer torque limit 66.83 N·m and the fault
 policy ``wrinkle = "continue"`` (wrinkling alarms are logged and counted, the motion goes on).
 
 Damping variants (one batch per scenario, ``Model.rollout_task`` on all cores):
@@ -81,9 +81,9 @@ Metrics (one row per run)
     Peak of the motor-torque channels tau1..3 over the run [N·m] (holding torque included).
     The channel is the torque at the joint output acting on the link, ``M q̈ + b`` of the
     bare chain: it also carries the reaction of the reflected rotor inertia (0.05 kg·m²), so
-    it can exceed the drive's 123 N·m while the drive's own torque is clamped.
+    it can exceed the drive's 66.83 N·m while the drive's own torque is clamped.
 ``sat_s``
-    Time the drive's torque command sat at the 123 N·m limit [s].
+    Time the drive's torque command sat at the 66.83 N·m limit [s].
 ``steady_offset_m``
     ``|ee − FK_rigid(q_enc)|``, FK_rigid the 7-DOF chain with its bending joints at 0
     (``Model.end_effector``) at the encoder angles, averaged over the last 2 s with a Hann
@@ -133,7 +133,7 @@ DEG = math.pi / 180
 AMP = 0.2  # step / square amplitude [rad]
 DELAY = 2.0  # step delay [s]
 SQ_PERIOD = 6.0  # square-wave period [s]
-TAU_MAX = 123.0  # motoreducer torque limit [N·m] (library default)
+TAU_MAX = 66.83  # motoreducer torque limit [N·m] (library default)
 THESIS_TARGET = (-0.8, -0.8, 0.9)  # chapter-8 Cartesian target [m]
 TARGET_REACH = 1.0  # distance of the reachable target from the shoulder centre [m]
 CH8_GAINS = {"vel_kp": 1000.0, "vel_ki": 10.0}
@@ -410,8 +410,8 @@ def _why(p: pd.DataFrame, worse: List[str]) -> str:
     unst = [str(sid) for sid, r in p.iterrows() if r["sat_s_on"] > 2 * r["sat_s_off"] + 0.2]
     if unst:
         why.append(
-            f"in {', '.join(unst)} the joint-1 damping PID (damp_kp = 0.04) is beyond its stability limit with the arm "
-            "horizontal: a limit cycle at the 123 N·m torque limit raises bending, tip acceleration and torque"
+            f"in {', '.join(unst)} the joint-1 damping PID is beyond its stability limit with the arm "
+            "horizontal: a limit cycle at the 66.83 N·m torque limit raises bending, tip acceleration and torque"
         )
     if any("peak torque" in w for w in worse):
         why.append(
@@ -501,7 +501,7 @@ def _write_markdown(df: pd.DataFrame, cl: List[Tuple[str, bool, str]], path: Pat
         "|ee − ee_final| stays below max(2 % of the move, 5 mm) (square waves: worst half-period; n.s. = not "
         "settled); RMS bending from the move start, all four bending channels (vib: minus the final bending); tip "
         "accel = |IMU 2 specific force − its initial value|; peak torque = joint-output torque channel (includes the "
-        "rotor-inertia reaction, can exceed the 123 N·m drive limit); sat = time the drive command sat at 123 N·m; "
+        "rotor-inertia reaction, can exceed the 66.83 N·m drive limit); sat = time the drive command sat at 66.83 N·m; "
         "steady offset = |ee − rigid FK(encoders)|, Hann-weighted over the last 2 s."
     )
     md.append("")
@@ -585,7 +585,7 @@ def _plots(runs: List[Tuple[Scenario, Any, List[Tuple[float, str]]]], out: Path)
 
     grid("Largest bending channel (of the undamped run): damping off / on", bending, "bending [rad]", "bending.png")
     grid("End-effector distance to its final position (dotted: settling band of the last segment)", ee_err, "|ee - ee_f| [m]", "ee_settling.png")
-    grid("Largest motor torque channel (dotted: 123 N·m drive limit)", torque, "torque [N·m]", "torque.png")
+    grid("Largest motor torque channel (dotted: 66.83 N·m drive limit)", torque, "torque [N·m]", "torque.png")
     grid("Tip acceleration |f2 - f2(0)|", accel, "[m/s²]", "tip_accel.png")
 
 

@@ -28,6 +28,21 @@ RigidArm = _core.RigidArm
 ArmLike = Union["_core.Arm", str, "os.PathLike[str]"]
 
 
+def _report(errors: Sequence[Optional[Tuple[str, str]]], warns: Sequence[Sequence[str]], raise_on_error: bool) -> None:
+    """Raise the first failed job's error (``raise_on_error``) and issue every distinct
+    warning of a batch once, attributed to the caller of the public method."""
+    if raise_on_error:
+        for e in errors:
+            if e is not None:
+                _core._raise(e[0], e[1])
+    seen = set()
+    for ws in warns:
+        for w in ws:
+            if w not in seen:
+                seen.add(w)
+                _warnings.warn(w, PopupWarning, stacklevel=4)
+
+
 def load_arm(arm: ArmLike) -> "_core.Arm":
     """An :class:`Arm` from an Arm, a built-in name (``"popup-lab"``) or a path to a TOML
     arm file."""
@@ -447,16 +462,7 @@ class Model:
             fx_b,
         )
         err_msgs: List[Optional[str]] = [None if e is None else e[1] for e in errors]
-        if raise_on_error:
-            for e in errors:
-                if e is not None:
-                    _core._raise(e[0], e[1])
-        seen = set()
-        for ws in warns:
-            for w in ws:
-                if w not in seen:
-                    seen.add(w)
-                    _warnings.warn(w, PopupWarning, stacklevel=3)
+        _report(errors, warns, raise_on_error)
         params = self.describe()
         params.update(
             {
@@ -577,16 +583,7 @@ class Model:
             bool(check_step),
             "<task>",
         )
-        if raise_on_error:
-            for e in errors:
-                if e is not None:
-                    _core._raise(e[0], e[1])
-        seen = set()
-        for ws in warns:
-            for w in ws:
-                if w not in seen:
-                    seen.add(w)
-                    _warnings.warn(w, PopupWarning, stacklevel=3)
+        _report(errors, warns, raise_on_error)
         params = self.describe()
         params.update({"payload_kg": pay_b, "pressure_pa": pres_b, "q0": q0_b, "task": text, "sample_rate_hz": float(sample_rate), "seed": None})
         names = [p.name or p.kind.capitalize() for p in task.phases]

@@ -29,11 +29,18 @@ pub fn run_job(model: &Model, job: &Job) -> Result<Trajectory> {
 /// Run a batch on `threads` threads (0 = all cores; 1 = sequential on this thread).
 /// Results are in job order.
 pub fn rollout(model: &Model, jobs: &[Job], threads: usize) -> Vec<Result<Trajectory>> {
+    par_map(jobs, threads, |j| run_job(model, j))
+}
+
+/// `f` over `items` on `threads` threads (0 = all cores; 1 = sequential on this thread),
+/// results in item order. Each call writes only its own result, so the output does not
+/// depend on the thread count.
+pub(crate) fn par_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
-        if threads != 1 && jobs.len() > 1 {
-            let go = || jobs.par_iter().map(|j| run_job(model, j)).collect::<Vec<_>>();
+        if threads != 1 && items.len() > 1 {
+            let go = || items.par_iter().map(&f).collect::<Vec<_>>();
             return match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
                 Ok(pool) => pool.install(go),
                 Err(_) => go(),
@@ -41,5 +48,5 @@ pub fn rollout(model: &Model, jobs: &[Job], threads: usize) -> Vec<Result<Trajec
         }
     }
     let _ = threads;
-    jobs.iter().map(|j| run_job(model, j)).collect()
+    items.iter().map(f).collect()
 }

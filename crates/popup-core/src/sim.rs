@@ -168,6 +168,26 @@ pub(crate) fn diverged(model: &Model, k: usize, t: f64, q: &VecN, v: &VecN) -> O
     })
 }
 
+/// Update the wrinkling-alarm episodes at time `t` [s] from |M|/M_w per link: open an
+/// episode when a ratio exceeds 1, track its peak, close it when the ratio falls back.
+/// `open[l]` is the index of link l's open episode.
+pub(crate) fn track_alarms(open: &mut [Option<usize>; 2], alarms: &mut Vec<Alarm>, t: f64, ratio: [f64; 2]) {
+    for l in 0..2 {
+        match open[l] {
+            None if ratio[l] > 1.0 => {
+                open[l] = Some(alarms.len());
+                alarms.push(Alarm { link: l + 1, t_start: t, t_end: f64::NAN, peak_ratio: ratio[l] });
+            }
+            Some(a) if ratio[l] > 1.0 => alarms[a].peak_ratio = alarms[a].peak_ratio.max(ratio[l]),
+            Some(a) => {
+                alarms[a].t_end = t;
+                open[l] = None;
+            }
+            None => {}
+        }
+    }
+}
+
 /// Run one simulation.
 ///
 /// # Errors
@@ -249,20 +269,7 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
     };
     let mut track = |st: &State, alarms: &mut Vec<Alarm>| {
         let (_, ratio) = bending_moments(model, pd, st.t, &st.q, &st.v);
-        for l in 0..2 {
-            match open[l] {
-                None if ratio[l] > 1.0 => {
-                    open[l] = Some(alarms.len());
-                    alarms.push(Alarm { link: l + 1, t_start: st.t, t_end: f64::NAN, peak_ratio: ratio[l] });
-                }
-                Some(a) if ratio[l] > 1.0 => alarms[a].peak_ratio = alarms[a].peak_ratio.max(ratio[l]),
-                Some(a) => {
-                    alarms[a].t_end = st.t;
-                    open[l] = None;
-                }
-                None => {}
-            }
-        }
+        track_alarms(&mut open, alarms, st.t, ratio);
     };
     write(0, &st, &mut data);
     track(&st, &mut alarms);

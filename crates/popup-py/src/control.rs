@@ -124,16 +124,7 @@ pub fn closed_loop_rollout<'py>(
     }
     let m = model.m.clone();
     let results = py.detach(move || rollout_closed(&m, &jobs, threads));
-    let ns = results.iter().find_map(|r| r.as_ref().ok().map(|t| t.traj.nsample));
-    let ns = match ns {
-        Some(n) => n,
-        None => {
-            if let Some(Err(e)) = results.first() {
-                return Err(crate::errors::to_py(e.clone()));
-            }
-            0
-        }
-    };
+    let ns = crate::errors::batch_nsample(&results, |t| t.traj.nsample)?;
     let mut data = Array3::<f64>::from_elem((nb, ns, NCH), f64::NAN);
     let mut ctrl = Array3::<f64>::from_elem((nb, ns, NCTRL), f64::NAN);
     let (mut errors, mut events, mut status, mut alarms, mut warnings) = (vec![], vec![], vec![], vec![], vec![]);

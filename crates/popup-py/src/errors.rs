@@ -55,3 +55,16 @@ impl<T> IntoPy<T> for Result<T, Error> {
         self.map_err(to_py)
     }
 }
+
+/// Sample count of a batch: that of its first successful job; when every job failed, the
+/// first job's error is raised (0 for an empty batch).
+pub fn batch_nsample<T>(results: &[popup_core::Result<T>], nsample: impl Fn(&T) -> usize) -> PyResult<usize> {
+    match results.iter().find_map(|r| r.as_ref().ok().map(&nsample)) {
+        Some(n) => Ok(n),
+        None => match results.first() {
+            Some(Err(e)) => Err(to_py(e.clone())),
+            _ => Ok(0),
+        },
+    }
+}
+

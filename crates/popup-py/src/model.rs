@@ -311,17 +311,7 @@ impl PyModel {
         }
         let model = self.m.clone();
         let results = py.detach(move || rollout(&model, &jobs, threads));
-        let ns = results.iter().find_map(|r| r.as_ref().ok().map(|t| t.nsample));
-        let ns = match ns {
-            Some(n) => n,
-            None => {
-                // every job failed: raise the first error
-                if let Some(Err(e)) = results.first() {
-                    return Err(crate::errors::to_py(e.clone()));
-                }
-                0
-            }
-        };
+        let ns = crate::errors::batch_nsample(&results, |t| t.nsample)?;
         let mut data = Array3::<f64>::from_elem((nb, ns, NCH), f64::NAN);
         let mut errors = Vec::with_capacity(nb);
         let mut alarms = Vec::with_capacity(nb);

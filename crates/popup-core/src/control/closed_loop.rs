@@ -19,7 +19,7 @@ use crate::math::{MatN, Vec3, VecN};
 use crate::model::Model;
 use crate::params::{ParamData, Params};
 use crate::sensor::{bending_moments, sample, NCH};
-use crate::sim::{check_step, diverged, rest_state, Alarm, State, Trajectory};
+use crate::sim::{check_step, diverged, rest_state, track_alarms, Alarm, State, Trajectory};
 use crate::statics::gravity_torque;
 
 /// Number of controller channels.
@@ -485,20 +485,7 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
             break;
         }
         let (_, rt) = bending_moments(model, &pd, st.t, &st.q, &st.v);
-        for l in 0..2 {
-            match open[l] {
-                None if rt[l] > 1.0 => {
-                    open[l] = Some(alarms.len());
-                    alarms.push(Alarm { link: l + 1, t_start: st.t, t_end: f64::NAN, peak_ratio: rt[l] });
-                }
-                Some(a) if rt[l] > 1.0 => alarms[a].peak_ratio = alarms[a].peak_ratio.max(rt[l]),
-                Some(a) => {
-                    alarms[a].t_end = st.t;
-                    open[l] = None;
-                }
-                None => {}
-            }
-        }
+        track_alarms(&mut open, &mut alarms, st.t, rt);
         k += 1;
     }
     let ts = every as f64 * dt;
@@ -532,17 +519,5 @@ fn reference(cmd: &Command, el: f64, q_start: &[f64; 3]) -> [f64; 3] {
 /// Run a batch of closed-loop jobs on `threads` threads (0 = all cores); results in job
 /// order, bit-identical for any thread count.
 pub fn rollout_closed(model: &Model, jobs: &[(Params, ClosedLoop)], threads: usize) -> Vec<Result<ClosedTrajectory>> {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        if threads != 1 && jobs.len() > 1 {
-            let go = || jobs.par_iter().map(|(p, c)| run_closed_loop(model, p, c)).collect::<Vec<_>>();
-            return match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
-                Ok(pool) => pool.install(go),
-                Err(_) => go(),
-            };
-        }
-    }
-    let _ = threads;
-    jobs.iter().map(|(p, c)| run_closed_loop(model, p, c)).collect()
+    crate::rollout::par_map(jobs, threads, |(p, c)| run_closed_loop(model, p, c))
 }
