@@ -563,32 +563,3 @@ pub fn play(y: &[[f64; 3]], gap: &[f64; 3]) -> Vec<[f64; 3]> {
     }
     out
 }
-
-/// Delay columns `cols` of a row-major sample array (`nch` columns, uniform period `ts`)
-/// by `delay` seconds: `y(t_k) ← y(t_k − delay)` with Catmull–Rom interpolation, holding
-/// the first sample before the start.
-pub fn delay_columns(data: &mut [f64], nch: usize, cols: std::ops::Range<usize>, ts: f64, delay: f64) {
-    let n = data.len() / nch;
-    if n == 0 || delay == 0.0 {
-        return;
-    }
-    let s = delay / ts;
-    let mut col = vec![0.0; n];
-    for c in cols {
-        for k in 0..n {
-            col[k] = data[k * nch + c];
-        }
-        let at = |i: isize| col[i.clamp(0, n as isize - 1) as usize];
-        for k in 0..n {
-            let x = k as f64 - s;
-            if x <= 0.0 {
-                data[k * nch + c] = col[0];
-                continue;
-            }
-            let i = x.floor() as isize;
-            let u = x - i as f64;
-            let (p0, p1, p2, p3) = (at(i - 1), at(i), at(i + 1), at(i + 2));
-            data[k * nch + c] = p1 + 0.5 * u * (p2 - p0 + u * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + u * (3.0 * (p1 - p2) + p3 - p0)));
-        }
-    }
-}

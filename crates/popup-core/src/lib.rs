@@ -26,6 +26,9 @@ pub mod sim;
 pub mod control;
 pub mod spec;
 pub mod statics;
+pub mod stream;
+#[cfg(feature = "mcap")]
+pub mod log;
 
 pub use error::{Error, Result};
 

@@ -2,7 +2,8 @@
 //! divergence detection, sampling of the sensor channels and the wrinkling alarm log.
 
 use crate::drive::{Drive, Spline3};
-use crate::effects::{delay_columns, play};
+use crate::effects::play;
+use crate::stream::{Collect, Delay, DelayLine};
 use crate::error::{Error, Result};
 use crate::forward::prescribe;
 use crate::integrate::{step_with, Workspace};
@@ -286,13 +287,24 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
             write(k + 1, &st, &mut data);
         }
     }
-    let ts = every as f64 * dt;
     let sd = &fx.sensor_delay;
-    delay_columns(&mut data, NCH, 13..19, ts, sd.imu);
-    delay_columns(&mut data, NCH, 7..10, ts, sd.torque);
-    delay_columns(&mut data, NCH, 10..13, ts, sd.mocap);
-    if !cfg.drive.is_replay() {
-        delay_columns(&mut data, NCH, 1..7, ts, sd.encoder);
+    let enc = if cfg.drive.is_replay() { 0.0 } else { sd.encoder };
+    let mut line = DelayLine::new(
+        every as f64 * dt,
+        &[
+            Delay { cols: 13..19, delay: sd.imu },
+            Delay { cols: 7..10, delay: sd.torque },
+            Delay { cols: 10..13, delay: sd.mocap },
+            Delay { cols: 1..7, delay: enc },
+        ],
+    );
+    if !line.is_identity() {
+        let mut col = Collect::with_capacity(nsample);
+        for r in data.chunks_exact(NCH) {
+            line.push(r.try_into().expect("rows of NCH"), None, &mut col)?;
+        }
+        line.finish(&mut col)?;
+        data = col.data;
     }
     Ok(Trajectory { data, nsample, alarms, final_state: st, warnings: pd.warnings.clone() })
 }

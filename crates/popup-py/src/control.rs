@@ -137,10 +137,7 @@ pub fn closed_loop_rollout<'py>(
                 ctrl.index_axis_mut(numpy::ndarray::Axis(0), b).assign(&a);
                 errors.push(None);
                 events.push(ct.events.into_iter().map(|e| (e.t, e.kind.to_string(), e.from, e.to, e.detail)).collect());
-                status.push(match ct.status {
-                    Status::Completed => "completed".to_string(),
-                    Status::Unstable => "unstable".to_string(),
-                });
+                status.push(ct.status.name().to_string());
                 alarms.push(ct.traj.alarms.iter().map(|a| (a.link, a.t_start, a.t_end, a.peak_ratio)).collect());
                 warnings.push(ct.traj.warnings);
             }

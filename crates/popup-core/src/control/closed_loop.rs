@@ -9,7 +9,6 @@ use crate::control::machine::{Command, Event, FaultAction, Phase};
 use crate::control::ClosedLoop;
 use crate::drive::Drive;
 use crate::dynamics::forward_pass;
-use crate::effects::delay_columns;
 use crate::error::{Error, Result};
 use crate::forward::accel_with;
 use crate::integrate::{step_with, Workspace};
@@ -20,6 +19,7 @@ use crate::model::Model;
 use crate::params::{ParamData, Params};
 use crate::sensor::{bending_moments, sample, NCH};
 use crate::sim::{check_step, diverged, rest_state, track_alarms, Alarm, State, Trajectory};
+use crate::stream::{Collect, Delay, DelayLine, Flow, Sink, StateView};
 use crate::statics::gravity_torque;
 
 /// Number of controller channels.
@@ -43,6 +43,38 @@ pub enum Status {
     Completed,
     /// Stopped in the `Unstable` fault (non-finite or runaway state); later rows are NaN.
     Unstable,
+    /// Stopped by the sink (Ctrl-C on a logged run); later rows are NaN.
+    Interrupted,
+}
+
+impl Status {
+    /// `completed`, `unstable` or `interrupted`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Status::Completed => "completed",
+            Status::Unstable => "unstable",
+            Status::Interrupted => "interrupted",
+        }
+    }
+}
+
+/// How a streamed closed-loop run ended (the samples went to the sink).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunEnd {
+    /// Samples handed to the sink.
+    pub nsample: usize,
+    /// Samples a full run has (`duration / sample_period + 1`).
+    pub nsample_full: usize,
+    /// Wrinkling-alarm episodes in time order.
+    pub alarms: Vec<Alarm>,
+    /// State at the end of the run.
+    pub final_state: State,
+    /// Warnings (pressure clamped, ...).
+    pub warnings: Vec<String>,
+    /// The event log (also handed to the sink as it happened).
+    pub events: Vec<Event>,
+    /// How the run ended.
+    pub status: Status,
 }
 
 /// Result of a closed-loop run.
@@ -133,6 +165,28 @@ fn arm_parts(model: &Model, fr: &Frames, payload: f64, payload_radius: f64, part
 /// [`Error::StepTooLarge`] from the step check. A run that goes unstable is not an error: it
 /// ends in the `Unstable` fault (see [`Status`]).
 pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Result<ClosedTrajectory> {
+    let mut col = Collect::default();
+    let end = run_closed_loop_into(model, params, cfg, &mut col)?;
+    let (mut data, mut control) = (col.data, col.ctrl);
+    data.resize(end.nsample_full * NCH, f64::NAN);
+    control.resize(end.nsample_full * NCTRL, f64::NAN);
+    Ok(ClosedTrajectory {
+        traj: Trajectory { data, nsample: end.nsample_full, alarms: end.alarms, final_state: end.final_state, warnings: end.warnings },
+        control,
+        events: end.events,
+        status: end.status,
+    })
+}
+
+/// [`run_closed_loop`] streamed: samples (after the sensor delays), events (the log, and
+/// `wrinkle_start`/`wrinkle_end` for each alarm episode) and the true states go to `sink`
+/// as the run produces them; nothing per sample is kept, so memory does not grow with the
+/// duration. A sink returning [`Flow::Stop`] ends the run at that sample with
+/// [`Status::Interrupted`] (an `interrupted` event is logged).
+///
+/// # Errors
+/// As [`run_closed_loop`], and the sink's errors.
+pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, sink: &mut dyn Sink) -> Result<RunEnd> {
     let c = &cfg.controller;
     c.validate()?;
     cfg.sequence.validate()?;
@@ -178,9 +232,20 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
         check_step(model, &pd, &st.q, false)?;
     }
     let nstep = (cfg.duration / dt + 1e-9).floor() as usize;
-    let nsample = nstep / every + 1;
-    let mut data = vec![f64::NAN; nsample * NCH];
-    let mut ctrl = vec![f64::NAN; nsample * NCTRL];
+    let nsample_full = nstep / every + 1;
+    let sd = &params.effects.sensor_delay;
+    let mut line = DelayLine::new(
+        every as f64 * dt,
+        &[
+            Delay { cols: 13..19, delay: sd.imu },
+            Delay { cols: 7..10, delay: sd.torque },
+            Delay { cols: 10..13, delay: sd.mocap },
+            Delay { cols: 1..7, delay: sd.encoder },
+        ],
+    );
+    let mut nsample = 0usize;
+    let mut emitted = 0usize;
+    let mut row = [0.0; NCH];
     let mut events: Vec<Event> = Vec::new();
     let mut alarms: Vec<Alarm> = Vec::new();
     let mut open: [Option<usize>; 2] = [None, None];
@@ -253,11 +318,6 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
     }
     events.push(Event { t: t0, kind: "transition", from: "Start".into(), to: phases[0].name.clone(), detail: "run starts".into() });
 
-    let write = |k: usize, st: &State, drive: &Drive, pd: &ParamData, out: &[f64; NCTRL], data: &mut [f64], ctrl: &mut [f64]| {
-        let r = k / every;
-        sample(model, pd, drive, st.t, &st.q, &st.v, None, &mut data[r * NCH..(r + 1) * NCH]);
-        ctrl[r * NCTRL..(r + 1) * NCTRL].copy_from_slice(out);
-    };
 
     let mut k = 0usize;
     loop {
@@ -469,8 +529,23 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
                 phase_ticks += 1;
             }
         }
+        let mut flow = Flow::Go;
+        while emitted < events.len() {
+            flow = merge(flow, sink.event(&events[emitted])?);
+            emitted += 1;
+        }
         if k % every == 0 {
-            write(k, &st, &drive, &pd, &out, &mut data, &mut ctrl);
+            flow = merge(flow, sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd: &pd })?);
+            sample(model, &pd, &drive, st.t, &st.q, &st.v, None, &mut row);
+            flow = merge(flow, line.push(&row, Some(&out), sink)?);
+            nsample += 1;
+        }
+        if flow == Flow::Stop && k < nstep {
+            let e = Event { t: st.t, kind: "interrupted", from: phase_name(cur, &fault), to: "Stopped".into(), detail: "run stopped by its sink (interrupt)".into() };
+            sink.event(&e)?;
+            events.push(e);
+            status = Status::Interrupted;
+            break;
         }
         if k == nstep {
             break;
@@ -480,23 +555,40 @@ pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Resu
         st.t = t0 + (k + 1) as f64 * dt;
         if let Some(e) = diverged(model, k, t, &st.q, &st.v) {
             let from = phase_name(cur, &fault);
-            events.push(Event { t: st.t, kind: "fault", from, to: "Unstable".into(), detail: e.to_string() });
+            let e = Event { t: st.t, kind: "fault", from, to: "Unstable".into(), detail: e.to_string() };
+            sink.event(&e)?;
+            events.push(e);
             status = Status::Unstable;
             break;
         }
         let (_, rt) = bending_moments(model, &pd, st.t, &st.q, &st.v);
+        let before = open;
         track_alarms(&mut open, &mut alarms, st.t, rt);
+        for l in 0..2 {
+            if open[l] != before[l] {
+                let a = &alarms[open[l].or(before[l]).expect("one of them is open")];
+                let (kind, detail) = if open[l].is_some() {
+                    ("wrinkle_start", format!("|M|/M_w > 1 on link {} (wrinkling)", l + 1))
+                } else {
+                    ("wrinkle_end", format!("|M|/M_w back below 1 on link {}; episode from t = {:.4} s, peak {:.3}", l + 1, a.t_start, a.peak_ratio))
+                };
+                sink.event(&Event { t: st.t, kind, from: format!("link {}", l + 1), to: format!("link {}", l + 1), detail })?;
+            }
+        }
         k += 1;
     }
-    let ts = every as f64 * dt;
-    let sd = &params.effects.sensor_delay;
-    if status == Status::Completed {
-        delay_columns(&mut data, NCH, 13..19, ts, sd.imu);
-        delay_columns(&mut data, NCH, 7..10, ts, sd.torque);
-        delay_columns(&mut data, NCH, 10..13, ts, sd.mocap);
-        delay_columns(&mut data, NCH, 1..7, ts, sd.encoder);
+    if line.finish(sink)? == Flow::Stop && status == Status::Completed && nsample < nsample_full {
+        status = Status::Interrupted;
     }
-    Ok(ClosedTrajectory { traj: Trajectory { data, nsample, alarms, final_state: st, warnings: pd.warnings.clone() }, control: ctrl, events, status })
+    Ok(RunEnd { nsample, nsample_full, alarms, final_state: st, warnings: pd.warnings.clone(), events, status })
+}
+
+fn merge(a: Flow, b: Flow) -> Flow {
+    if a == Flow::Stop || b == Flow::Stop {
+        Flow::Stop
+    } else {
+        Flow::Go
+    }
 }
 
 fn pd_gap(p: &Params) -> bool {
