@@ -88,6 +88,14 @@ pub enum Error {
         /// Details.
         message: String,
     },
+    /// Writing a log file failed (I/O or encoding).
+    #[error("log {path}: {message}")]
+    Log {
+        /// The file.
+        path: String,
+        /// What failed.
+        message: String,
+    },
 }
 
 /// Result alias of the core.

@@ -21,6 +21,7 @@ pub mod math;
 pub mod model;
 pub mod params;
 pub mod rollout;
+pub mod scenario;
 pub mod sensor;
 pub mod sim;
 pub mod control;

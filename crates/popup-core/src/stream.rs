@@ -94,6 +94,36 @@ impl Sink for Collect {
     }
 }
 
+/// Two sinks fed the same output (e.g. a [`Collect`] and a log); the run stops when
+/// either asks.
+pub struct Tee<'a, 'b> {
+    /// First sink.
+    pub a: &'a mut dyn Sink,
+    /// Second sink.
+    pub b: &'b mut dyn Sink,
+}
+
+/// `Stop` if either says stop.
+pub(crate) fn either(x: Flow, y: Flow) -> Flow {
+    if x == Flow::Stop || y == Flow::Stop {
+        Flow::Stop
+    } else {
+        Flow::Go
+    }
+}
+
+impl Sink for Tee<'_, '_> {
+    fn sample(&mut self, row: &[f64; NCH], ctrl: Option<&[f64; NCTRL]>) -> Result<Flow> {
+        Ok(either(self.a.sample(row, ctrl)?, self.b.sample(row, ctrl)?))
+    }
+    fn event(&mut self, e: &Event) -> Result<Flow> {
+        Ok(either(self.a.event(e)?, self.b.event(e)?))
+    }
+    fn state(&mut self, s: &StateView<'_>) -> Result<Flow> {
+        Ok(either(self.a.state(s)?, self.b.state(s)?))
+    }
+}
+
 /// Delay of a group of channels: columns `cols` lag by `delay` [s].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Delay {

@@ -16,6 +16,7 @@ fn class_name(e: &Error) -> &'static str {
         Error::StepTooLarge { .. } => "StepTooLargeError",
         Error::Diverged { .. } => "DivergenceError",
         Error::NoConvergence { .. } => "ConvergenceError",
+        Error::Log { .. } => "LogWriteError",
     }
 }
 
@@ -40,6 +41,7 @@ pub fn make(py: Python<'_>, cls: &str, msg: &str) -> PyErr {
     match built {
         Ok(obj) => PyErr::from_value(obj),
         Err(_) if matches!(cls, "DivergenceError" | "ConvergenceError") => PyRuntimeError::new_err(msg.to_string()),
+        Err(_) if cls == "LogWriteError" => pyo3::exceptions::PyOSError::new_err(msg.to_string()),
         Err(_) => PyValueError::new_err(msg.to_string()),
     }
 }

@@ -19,7 +19,7 @@ use crate::model::Model;
 use crate::params::{ParamData, Params};
 use crate::sensor::{bending_moments, sample, NCH};
 use crate::sim::{check_step, diverged, rest_state, track_alarms, Alarm, State, Trajectory};
-use crate::stream::{Collect, Delay, DelayLine, Flow, Sink, StateView};
+use crate::stream::{either, Collect, Delay, DelayLine, Flow, Sink, StateView};
 use crate::statics::gravity_torque;
 
 /// Number of controller channels.
@@ -135,7 +135,7 @@ fn rigid_tip(model: &Model, qm: &[f64; 3]) -> (Vec3, [Vec3; 3]) {
 /// Collision parts of the arm at `fr`: one capsule per chain segment of each link (from
 /// frame i to frame i+1 beyond the shoulder), then the payload sphere. Writes `parts`,
 /// returns how many.
-fn arm_parts(model: &Model, fr: &Frames, payload: f64, payload_radius: f64, parts: &mut [Capsule], names: &mut [usize]) -> usize {
+pub(crate) fn arm_parts(model: &Model, fr: &Frames, payload: f64, payload_radius: f64, parts: &mut [Capsule], names: &mut [usize]) -> usize {
     let mut n = 0;
     for i in model.motor_idx[1]..model.nv {
         let (a, b) = (fr.p_wb[i], fr.p_wb[i + 1]);
@@ -531,13 +531,13 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
         }
         let mut flow = Flow::Go;
         while emitted < events.len() {
-            flow = merge(flow, sink.event(&events[emitted])?);
+            flow = either(flow, sink.event(&events[emitted])?);
             emitted += 1;
         }
         if k % every == 0 {
-            flow = merge(flow, sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd: &pd })?);
+            flow = either(flow, sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd: &pd })?);
             sample(model, &pd, &drive, st.t, &st.q, &st.v, None, &mut row);
-            flow = merge(flow, line.push(&row, Some(&out), sink)?);
+            flow = either(flow, line.push(&row, Some(&out), sink)?);
             nsample += 1;
         }
         if flow == Flow::Stop && k < nstep {
@@ -581,14 +581,6 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
         status = Status::Interrupted;
     }
     Ok(RunEnd { nsample, nsample_full, alarms, final_state: st, warnings: pd.warnings.clone(), events, status })
-}
-
-fn merge(a: Flow, b: Flow) -> Flow {
-    if a == Flow::Stop || b == Flow::Stop {
-        Flow::Stop
-    } else {
-        Flow::Go
-    }
 }
 
 fn pd_gap(p: &Params) -> bool {
