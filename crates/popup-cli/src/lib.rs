@@ -1,7 +1,10 @@
 //! `popup`: the headless command-line front of popup-core.
 //!
-//! This first version covers arm files, statics and long torque-driven runs written to CSV;
-//! scenario files, sweeps and MCAP logging come with later issues.
+//! Headless runs from scenario files logged to MCAP (`run`), parameter grids (`sweep`),
+//! scenario validation (`check`), and the arm tools (`arm`, `statics`, `hold`, `info`).
+//! Exit codes: 0 success; 1 the run failed (went unstable, a log write failed, runs of a
+//! sweep failed); 2 usage error or invalid input (every problem of a scenario is listed);
+//! 130 / 143 interrupted by SIGINT / SIGTERM (the log is finished properly).
 //!
 //! The CLI is a library so that two front ends share it: the `popup` binary of this crate
 //! (`src/main.rs`) and the Python package's `popup` command, which routes its non-Python
@@ -19,6 +22,14 @@ use popup_core::spec::ArmSpec;
 use popup_core::statics::{gravity_torque, locked_modes};
 use std::ffi::OsString;
 use std::io::Write;
+use std::path::{Path, PathBuf};
+
+pub mod execute;
+pub mod progress;
+pub mod sweep;
+
+use popup_core::scenario::Scenario;
+use progress::{Mode, Progress, StopFlags};
 
 #[derive(Parser)]
 #[command(name = "popup", version, about = "Simulation of inflatable robot arms (headless)")]
@@ -47,6 +58,52 @@ struct ArmArgs {
 enum Cmd {
     /// Print version, build profile and features.
     Info,
+    /// Run a scenario headless and log it to an MCAP file (open it in Foxglove).
+    Run {
+        /// Scenario file (TOML, docs/logging.md).
+        scenario: PathBuf,
+        /// MCAP output path.
+        #[arg(long)]
+        out: PathBuf,
+        /// Simulated time [s] (default: the scenario's duration_s).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Seed of the sensor noise (default: the scenario's seed).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Progress display: a bar on a terminal (auto), a line per flush (lines), none.
+        #[arg(long, value_enum, default_value_t = Mode::Auto)]
+        progress: Mode,
+    },
+    /// Run a grid of scenario variants in parallel; writes DIR/summary.csv (one row per run).
+    Sweep {
+        /// Scenario file.
+        scenario: PathBuf,
+        /// KEY=START:STOP:STEP or KEY=V1,V2,... for any numeric key of the scenario
+        /// (payload_kg, pressure_pa, pressure_pa[1], controller.gains.vel_kp, ...); repeat for a grid.
+        #[arg(long = "param", required = true)]
+        params: Vec<String>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write one MCAP log per run (DIR/run_NNNN.mcap).
+        #[arg(long)]
+        mcap: bool,
+        /// Worker threads (0 = all cores).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Simulated time per run [s] (default: the scenario's).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Seed of the sensor noise, the same for every run (default: the scenario's).
+        #[arg(long)]
+        seed: Option<u64>,
+    },
+    /// Validate a scenario file and list every problem (file:line: key: message).
+    Check {
+        /// Scenario file.
+        scenario: PathBuf,
+    },
     /// Print the complete TOML of an arm (built-in name or file), e.g. to start an arm file.
     Arm {
         /// Built-in name or path.
@@ -123,10 +180,13 @@ where
             e.exit_code()
         }
         Ok(cli) => match go(cli) {
-            Ok(()) => 0,
+            Ok(code) => code,
             Err(e) => {
                 eprintln!("popup: error: {e}");
-                2
+                match e {
+                    popup_core::Error::Log { .. } => 1,
+                    _ => 2,
+                }
             }
         },
     };
@@ -135,8 +195,94 @@ where
     code
 }
 
-fn go(cli: Cli) -> popup_core::Result<()> {
+/// Read a scenario, or print every problem (`file:line: key: message`) and return None.
+fn read_scenario(path: &Path) -> Option<Scenario> {
+    match Scenario::read(path) {
+        Ok(sc) => Some(sc),
+        Err(ps) => {
+            for p in &ps {
+                eprintln!("popup: error: {p}");
+            }
+            eprintln!("popup: {} problem{} in {}", ps.len(), if ps.len() == 1 { "" } else { "s" }, path.display());
+            None
+        }
+    }
+}
+
+fn run_scenario(path: &Path, out: &Path, duration: Option<f64>, seed: Option<u64>, mode: Mode) -> popup_core::Result<i32> {
+    let Some(mut sc) = read_scenario(path) else { return Ok(2) };
+    if let Some(d) = duration {
+        if !(d.is_finite() && d > 0.0) {
+            return Err(popup_core::Error::input("--duration", format!("{d} s must be finite and > 0")));
+        }
+        sc.closed.duration = d;
+    }
+    if let Some(s) = seed {
+        sc.seed = s;
+    }
+    let (stop, ids) = StopFlags::register();
+    let mut prog = Progress::new(mode, sc.closed.duration, sc.log.flush_every_s, stop.clone());
+    let mut extra = std::collections::BTreeMap::new();
+    extra.insert("command".to_string(), format!("popup run {} --out {}", path.display(), out.display()));
+    extra.insert("dt".to_string(), sc.options.dt.to_string());
+    extra.insert("sample_rate_hz".to_string(), (1.0 / sc.closed.sample_period).to_string());
+    let res = execute::execute(&sc, Some(out), &mut prog, extra);
+    StopFlags::unregister(ids);
+    let o = res?;
+    for w in &o.warnings {
+        eprintln!("popup: warning: {w}");
+    }
+    let m = &o.metrics;
+    eprintln!(
+        "popup: {} at t = {} s: {} samples -> {} (peak |M|/M_w {:.3}, {:.3}; {} wrinkling alarm{}{})",
+        o.status.name(),
+        m.t_last,
+        m.samples,
+        out.display(),
+        m.peak_ratio[0],
+        m.peak_ratio[1],
+        m.wrinkle_alarms,
+        if m.wrinkle_alarms == 1 { "" } else { "s" },
+        if o.nonfinite > 0 { format!("; {} non-finite samples dropped", o.nonfinite) } else { String::new() }
+    );
+    Ok(match o.status {
+        popup_core::control::closed_loop::Status::Completed => 0,
+        popup_core::control::closed_loop::Status::Unstable => 1,
+        popup_core::control::closed_loop::Status::Interrupted => stop.exit_code(),
+    })
+}
+
+fn go(cli: Cli) -> popup_core::Result<i32> {
     match cli.cmd {
+        Cmd::Run { scenario, out, duration, seed, progress } => return run_scenario(&scenario, &out, duration, seed, progress),
+        Cmd::Check { scenario } => {
+            let Some(sc) = read_scenario(&scenario) else { return Ok(2) };
+            println!(
+                "{}: ok: arm {}, payload {} kg, pressures {:?} Pa, {} phase{}, {} s at dt = {} s, sensors at {} Hz",
+                scenario.display(),
+                sc.arm_name,
+                sc.params.payload_kg,
+                sc.params.pressure_pa,
+                sc.closed.sequence.phases.len(),
+                if sc.closed.sequence.phases.len() == 1 { "" } else { "s" },
+                sc.closed.duration,
+                sc.options.dt,
+                1.0 / sc.closed.sample_period
+            );
+        }
+        Cmd::Sweep { scenario, params, out, mcap, threads, duration, seed } => {
+            let axes = params.iter().map(|p| sweep::parse_axis(p)).collect::<popup_core::Result<Vec<_>>>()?;
+            let (stop, ids) = StopFlags::register();
+            let res = sweep::sweep(&scenario, &axes, &out, mcap, threads, duration, seed, &stop);
+            StopFlags::unregister(ids);
+            let failed = res?;
+            let n: usize = axes.iter().map(|a| a.values.len()).product();
+            eprintln!("popup: {n} runs, {failed} not completed -> {}", out.join("summary.csv").display());
+            if stop.raised() {
+                return Ok(stop.exit_code());
+            }
+            return Ok(i32::from(failed > 0));
+        }
         Cmd::Info => {
             println!("popup {}", popup_core::VERSION);
             println!("build profile: {}", if cfg!(debug_assertions) { "debug" } else { "release" });
@@ -200,5 +346,5 @@ fn go(cli: Cli) -> popup_core::Result<()> {
             }
         }
     }
-    Ok(())
+    Ok(0)
 }
