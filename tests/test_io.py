@@ -268,10 +268,11 @@ def test_missing_files(tmp_path: Path) -> None:
     refused(both, "both measurements.csv and measurements.parquet")
 
 
-def test_mcap_is_a_later_feature(tmp_path: Path) -> None:
+def test_mcap_run_needs_experiment_metadata(tmp_path: Path) -> None:
+    # MCAP runs are read by popup.read_log (tests/test_mcaplog.py); a bare file has no experiment
     p = tmp_path / "run.mcap"
     p.write_bytes(b"\x89MCAP0\r\n")
-    refused(p, "run.mcap", "MCAP support arrives with the MCAP logging feature")
+    refused(p, "run.mcap", "no experiment metadata record")
 
 
 def test_parquet_without_pyarrow(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

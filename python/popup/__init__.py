@@ -3,7 +3,7 @@
 The engine is Rust (``popup._core``); this package is the user workflow: arms, models,
 single and batched runs, results with ``.to_pandas()`` and ``.plot()``; measured runs,
 comparison, diagnosis against the effect library (:mod:`popup.effects`), the
-add-effect-and-refit loop and reports.
+add-effect-and-refit loop and reports; MCAP run logs (:func:`read_log`).
 """
 
 from __future__ import annotations
@@ -15,10 +15,13 @@ from .exceptions import (
     ConvergenceError,
     DivergenceError,
     InputError,
+    LogFileError,
+    LogWriteError,
     MeasuredRunError,
     ParameterError,
     PopupError,
     PopupWarning,
+    ScenarioError,
     SingularityError,
     StepTooLargeError,
     UnknownArmError,
@@ -27,11 +30,15 @@ from .exceptions import (
 from .model import Arm, Model, RigidArm, load_arm
 from .compare import Comparison
 from .io import MeasuredRun, read_run, write_run
+from . import mcaplog
+from .mcaplog import RunLog, read_log
 from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
 from .diagnosis import Diagnosis, History, Suspect, diagnose, improve
 from . import report, synth
 from . import control
 from .control import Controller, ControlBatch, ControlResult, Obstacle, Phase, Task
+from . import scenario
+from .scenario import Scenario
 
 __version__: str = _core.__version__
 build_profile: str = _core.BUILD_PROFILE
@@ -46,7 +53,10 @@ __all__ = [
     "MeasuredRun",
     "read_run",
     "write_run",
+    "RunLog",
+    "read_log",
     "io",
+    "mcaplog",
     "compare",
     "Comparison",
     "effects",
@@ -79,6 +89,11 @@ __all__ = [
     "DivergenceError",
     "ConvergenceError",
     "MeasuredRunError",
+    "LogFileError",
+    "LogWriteError",
+    "ScenarioError",
+    "Scenario",
+    "scenario",
     "PopupWarning",
     "__version__",
     "build_profile",

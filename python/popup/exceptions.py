@@ -18,6 +18,9 @@ __all__ = [
     "DivergenceError",
     "ConvergenceError",
     "MeasuredRunError",
+    "LogFileError",
+    "LogWriteError",
+    "ScenarioError",
 ]
 
 
@@ -63,6 +66,34 @@ class ConvergenceError(PopupError, RuntimeError):
 
 class MeasuredRunError(PopupError, ValueError):
     """A measured run (experiment.toml + measurements) is malformed."""
+
+
+class LogFileError(MeasuredRunError):
+    """An MCAP log (:func:`popup.read_log`, or a measured run given as a ``.mcap`` file)
+    cannot be read: not an MCAP file, a corrupted record (CRC mismatch), or a layout
+    other than ``docs/logging.md``. A :class:`MeasuredRunError` (so also a
+    :class:`PopupError` and a ``ValueError``), because an MCAP log is also the
+    measured-run container."""
+
+
+class LogWriteError(PopupError, OSError):
+    """Writing an MCAP log failed (the file cannot be created, a write failed)."""
+
+
+class ScenarioError(PopupError, ValueError):
+    """A scenario file is invalid. ``problems`` lists every problem found as
+    ``(file, line, key, message)`` (line 1-based, 0 when unknown)."""
+
+    def __init__(self, problems: "object") -> None:
+        if isinstance(problems, str):
+            self.problems: list = []
+            msg = problems
+        else:
+            self.problems = [tuple(p) for p in problems]  # type: ignore[attr-defined]
+            lines = [f"{f}:{ln}: {k}: {m}" if k else f"{f}:{ln}: {m}" for f, ln, k, m in self.problems]
+            n = len(self.problems)
+            msg = f"{n} problem{'s' if n != 1 else ''} in the scenario:\n" + "\n".join(lines)
+        super().__init__(msg)
 
 
 class PopupWarning(UserWarning):

@@ -29,8 +29,12 @@ an error.
 run (:class:`~popup.SimResult`) into the measured-run columns so it can be written and
 compared like a measured one.
 
-MCAP runs (a single ``.mcap`` file) arrive with the MCAP logging feature; reading one
-now is a clear error.
+A measured run may also be a single ``.mcap`` file laid out as ``docs/logging.md`` (the
+log a popup run writes, or a measured run from another tool): :func:`read_run` reads it
+with :func:`popup.read_log`, takes the experiment from its ``experiment`` metadata and
+the measured-run columns from its ``/popup/*`` sample topics, and checks both exactly as
+it checks a folder. A file cut short (a killed run) is read up to its last complete
+record, with a warning saying what was lost.
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ import sys
 import warnings as _warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
 
 import numpy as np
 
@@ -154,9 +158,11 @@ class MeasuredRun:
     data : pandas.DataFrame
         The measurements as read: one column per file column, in file order, every
         column float64, missing cells NaN, a default RangeIndex (row ``i`` of the frame
-        is data row ``i + 1`` of the file). SI units (:data:`UNITS`).
+        is data row ``i + 1`` of the file). SI units (:data:`UNITS`). For an MCAP run:
+        ``t`` and the measured-run columns of its sample topics, merged on the union of
+        their ``t`` (other channels, e.g. bending, stay in :func:`popup.read_log`).
     source : Path
-        The run folder.
+        The run folder, or the ``.mcap`` file of an MCAP run.
     format : str
         ``"popup-run/1"``.
     arm : str
@@ -175,9 +181,10 @@ class MeasuredRun:
         The ``[initial]`` and ``[controller]`` tables, if given.
     warnings : list of str
         Every warning issued while reading (unknown columns or keys, rows skipped by
-        the encoder replay).
+        the encoder replay, an MCAP file cut short).
     data_file : Path or None
-        The measurements file read.
+        The measurements file read (``measurements.csv``/``.parquet`` or the ``.mcap``
+        file).
     """
 
     experiment: Dict[str, Any]
@@ -230,8 +237,9 @@ class MeasuredRun:
     @property
     def arm_source(self) -> str:
         """What :class:`~popup.Model` gets as its arm: the built-in name, or the arm
-        file's path resolved against the run folder."""
-        return _resolve_arm(self.arm, self.source)
+        file's path resolved against the run folder (the ``.mcap`` file's folder)."""
+        folder = self.source.parent if self.data_file == self.source else self.source
+        return _resolve_arm(self.arm, folder)
 
     def to_pandas(self) -> "pd.DataFrame":
         """A copy of :attr:`data` indexed by ``t`` [s] (like :meth:`SimResult.to_pandas`),
@@ -307,8 +315,10 @@ def read_run(path: PathLike) -> MeasuredRun:
     ----------
     path : str or path
         The run folder (with ``experiment.toml`` and ``measurements.csv`` or
-        ``measurements.parquet``), or one of those two files inside it. A ``.mcap`` file
-        is refused for now (MCAP support arrives with the MCAP logging feature).
+        ``measurements.parquet``), or one of those two files inside it, or a ``.mcap``
+        log (``docs/logging.md``): its ``experiment`` metadata is the experiment (arm
+        paths relative to the file's folder), its ``/popup/*`` sample topics give the
+        measured-run columns.
 
     Returns
     -------
@@ -318,20 +328,20 @@ def read_run(path: PathLike) -> MeasuredRun:
     ------
     popup.MeasuredRunError
         Anything the spec calls bad input (the message names the file, the row or
-        column and what was expected).
+        column and what was expected). For a ``.mcap`` file, a
+        :class:`~popup.LogFileError` (a MeasuredRunError) when the file cannot be read
+        (not MCAP, a corrupted record, no ``experiment`` metadata).
 
     Warns
     -----
     popup.PopupWarning
         Unknown column names, unknown ``experiment.toml`` keys, encoder rows skipped for
-        a missing angle. The same texts are in :attr:`MeasuredRun.warnings`.
+        a missing angle, an MCAP file cut short (what was lost). The same texts are in
+        :attr:`MeasuredRun.warnings`.
     """
     p = Path(os.fspath(path))
-    if p.suffix.lower() == ".mcap":
-        raise MeasuredRunError(
-            f"{p}: MCAP runs are not supported yet; MCAP support arrives with the MCAP logging feature. "
-            f"For now give a folder with {_TOML} and {_CSV}."
-        )
+    if p.suffix.lower() == ".mcap" and not p.is_dir():
+        return _read_mcap(p)
     if p.is_file():
         if p.name not in (_TOML, _CSV, _PARQUET):
             raise MeasuredRunError(f"{p}: expected a run folder (with {_TOML} and {_CSV} or {_PARQUET}), got a file")
@@ -374,6 +384,33 @@ def read_run(path: PathLike) -> MeasuredRun:
     )
 
 
+def _read_mcap(p: Path) -> MeasuredRun:
+    """A measured run from a ``.mcap`` log: the same checks as a run folder."""
+    from .exceptions import LogFileError
+    from .mcaplog import read_log
+
+    log = read_log(p)
+    where_exp = f"{p} (metadata record experiment)"
+    if "experiment" not in log.metadata:
+        raise LogFileError(
+            f"{p}: no experiment metadata record; a measured-run MCAP needs one (key toml with a complete "
+            f"{_TOML}, or one key per experiment key: {', '.join(_REQUIRED_KEYS)}, ...; docs/logging.md)"
+        )
+    warns: List[str] = [] if log.complete else [f"{p}: the file was cut short: {log.lost}"]
+    typed = _check_experiment(log.experiment, where_exp, p.parent, warns)
+    cols = [c for c in log.columns if c in MEASURED_COLUMNS and c != "t"]
+    if not cols:
+        raise LogFileError(
+            f"{p}: no measured-run samples: none of the topics {', '.join(log.topics) or '(none)'} has a "
+            f"measured-run column ({', '.join(MEASURED_COLUMNS[1:])})"
+        )
+    df = _check_data(log._frame(cols), str(p), None, warns)
+    _check_replay(typed, df, where_exp, str(p), None, warns)
+    for w in warns:
+        _warnings.warn(w, PopupWarning, stacklevel=3)
+    return MeasuredRun(experiment=log.experiment, data=df, source=p, warnings=warns, data_file=p, **typed)
+
+
 def _load_toml(path: Path) -> Dict[str, Any]:
     try:
         text = path.read_bytes().decode("utf-8")
@@ -381,20 +418,25 @@ def _load_toml(path: Path) -> Dict[str, Any]:
         raise MeasuredRunError(f"{path}: not UTF-8 text (byte {e.start}); TOML files are UTF-8") from None
     except OSError as e:
         raise MeasuredRunError(f"{path}: cannot be read ({e.strerror})") from None
+    return _parse_toml(text, str(path))
+
+
+def _parse_toml(text: str, where: str, error: Type[MeasuredRunError] = MeasuredRunError) -> Dict[str, Any]:
+    """Parse TOML text; a syntax error raises ``error`` naming ``where`` and the line."""
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         msg = str(e)
         m = re.search(r"line (\d+)", msg)
-        where = ""
+        line = ""
         if m is not None:
             n = int(m.group(1))
             src = text.splitlines()
             if 1 <= n <= len(src):
-                where = f"; line {n}: {src[n - 1]!r}"
+                line = f"; line {n}: {src[n - 1]!r}"
             else:
-                where = f"; line {n} (end of file)"
-        raise MeasuredRunError(f"{path}: malformed TOML: {msg}{where}") from None
+                line = f"; line {n} (end of file)"
+        raise error(f"{where}: malformed TOML: {msg}{line}") from None
 
 
 def _is_number(v: Any) -> bool:

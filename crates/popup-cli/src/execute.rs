@@ -84,6 +84,8 @@ pub struct Outcome {
     pub nonfinite: usize,
     /// Warnings of the run (pressure clamped, ...).
     pub warnings: Vec<String>,
+    /// Wrinkling-alarm episodes.
+    pub alarms: Vec<popup_core::sim::Alarm>,
 }
 
 /// The scenario's `[log]` table as logger options.
@@ -107,7 +109,9 @@ pub fn log_options(sc: &Scenario) -> LogOptions {
 ///
 /// # Errors
 /// Model/run configuration errors, log I/O errors.
-pub fn execute(sc: &Scenario, out: Option<&Path>, progress: &mut Progress, extra: BTreeMap<String, String>) -> Result<Outcome> {
+/// `also` receives the same (noisy) output, e.g. a [`popup_core::stream::Collect`] to keep
+/// the arrays.
+pub fn execute(sc: &Scenario, out: Option<&Path>, progress: &mut Progress, extra: BTreeMap<String, String>, also: Option<&mut dyn Sink>) -> Result<Outcome> {
     let model = sc.model()?;
     let mut metrics = Metrics::default();
     let meta = RunMeta { experiment_toml: sc.experiment_toml(), scenario: sc.text.clone(), seed: sc.seed, extra };
@@ -125,7 +129,9 @@ pub fn execute(sc: &Scenario, out: Option<&Path>, progress: &mut Progress, extra
             Some(l) => l,
             None => &mut null,
         };
-        let mut tee = Tee { a: &mut metrics, b: sink_log };
+        let mut null2 = Null;
+        let mut inner = Tee { a: sink_log, b: also.unwrap_or(&mut null2) };
+        let mut tee = Tee { a: &mut metrics, b: &mut inner };
         let mut noisy = Noisy::new(&mut tee, &sc.noise, sc.seed);
         let mut watch = Watch { inner: &mut noisy, progress: &mut *progress };
         run_closed_loop_into(&model, &sc.params, &sc.closed, &mut watch)
@@ -137,7 +143,7 @@ pub fn execute(sc: &Scenario, out: Option<&Path>, progress: &mut Progress, extra
                 Some(l) => l.finish(end.status.name())?.nonfinite_dropped,
                 None => 0,
             };
-            Ok(Outcome { status: end.status, metrics, nonfinite, warnings: end.warnings })
+            Ok(Outcome { status: end.status, metrics, nonfinite, warnings: end.warnings, alarms: end.alarms })
         }
         Err(e) => {
             if let Some(l) = logger {

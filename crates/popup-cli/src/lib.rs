@@ -226,7 +226,7 @@ fn run_scenario(path: &Path, out: &Path, duration: Option<f64>, seed: Option<u64
     extra.insert("command".to_string(), format!("popup run {} --out {}", path.display(), out.display()));
     extra.insert("dt".to_string(), sc.options.dt.to_string());
     extra.insert("sample_rate_hz".to_string(), (1.0 / sc.closed.sample_period).to_string());
-    let res = execute::execute(&sc, Some(out), &mut prog, extra);
+    let res = execute::execute(&sc, Some(out), &mut prog, extra, None);
     StopFlags::unregister(ids);
     let o = res?;
     for w in &o.warnings {

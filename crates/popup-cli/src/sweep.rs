@@ -80,7 +80,7 @@ pub fn sweep(path: &Path, axes: &[Axis], out: &Path, mcap: bool, threads: usize,
         for (a, v) in axes.iter().zip(&pts[i]) {
             extra.insert(format!("sweep.{}", a.key), v.to_string());
         }
-        execute(&scs[i], log.as_deref(), &mut Progress::silent(stop.clone()), extra)
+        execute(&scs[i], log.as_deref(), &mut Progress::silent(stop.clone()), extra, None)
     };
     let run_all = || (0..pts.len()).into_par_iter().map(job).collect::<Vec<_>>();
     let results = if threads == 0 {

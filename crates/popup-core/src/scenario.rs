@@ -247,8 +247,16 @@ fn load_arm(name: &str, base_dir: &Path) -> std::result::Result<(ArmSpec, Option
     ArmSpec::from_toml(&text, &path.display().to_string()).map(|a| (a, Some(path))).map_err(|e| e.to_string())
 }
 
+/// An array of numbers, or one number for all `n` elements.
+fn numbers_or_one(doc: &Doc<'_>, key: &str, v: &Val<'_>, n: usize, out: &mut Vec<Problem>) -> Option<Vec<f64>> {
+    match v.get_ref() {
+        DeValue::Array(_) => doc.value::<Vec<f64>>(key, v, out),
+        _ => doc.value::<f64>(key, v, out).map(|x| vec![x; n]),
+    }
+}
+
 /// One `[effects.<name>]` table merged over the arm's values of that effect, each parameter
-/// checked for shape; then the effect is validated on its own. `None` on a problem.
+/// checked for shape (one number sets every element of a per-joint or per-link parameter); then the effect is validated on its own. `None` on a problem.
 fn merge_effect(doc: &Doc<'_>, name: &str, v: &Val<'_>, arm: &toml::Table, out: &mut Vec<Problem>) -> Option<toml::Table> {
     let path = format!("effects.{name}");
     let t = doc.table(&path, v, out)?;
@@ -259,7 +267,7 @@ fn merge_effect(doc: &Doc<'_>, name: &str, v: &Val<'_>, arm: &toml::Table, out: 
     for (k, kv) in t.iter() {
         let key = join(&path, k.get_ref());
         let new = match sub.get(k.get_ref().as_ref()) {
-            Some(toml::Value::Array(a)) => match doc.value::<Vec<f64>>(&key, kv, out) {
+            Some(toml::Value::Array(a)) => match numbers_or_one(doc, &key, kv, a.len(), out) {
                 Some(xs) if xs.len() == a.len() => toml::Value::Array(xs.into_iter().map(toml::Value::Float).collect()),
                 Some(xs) => {
                     out.push(doc.problem(&key, doc.line_at(k.span().start), format!("needs {} values, got {}", a.len(), xs.len())));
@@ -469,23 +477,22 @@ impl Scenario {
         let noise = read_noise(&doc, &mut out);
         let log = read_log(&doc, head.sample_rate_hz, &mut out);
         let control = read_control(&arm, &doc, &mut out);
-        let controller = control.as_ref().map_or_else(ControllerSpec::default, |c| c.controller);
-        let dt = check_timing(&doc, &head, &controller, &mut out);
+        let dt = check_timing(&doc, &head, &control.controller, &mut out);
         let options = Options { dt, integrator: head.integrator, gravity: None, disable: Disable { gravity: !head.gravity, ..Disable::default() }, ..Options::default() };
         let params = Params {
             payload_kg: head.payload_kg.unwrap_or(arm.payload.default_kg),
             pressure_pa: head.pressure_pa.unwrap_or([arm.links[0].pressure_pa, arm.links[1].pressure_pa]),
             effects: arm.effects,
         };
-        let closed = control.map(|c| closed_loop(c, &head));
-        if let (true, true, Some(cl)) = (out.is_empty(), arm_ok, closed.as_ref()) {
+        let closed = closed_loop(control, &head);
+        if out.is_empty() && arm_ok {
             match Model::compile(&arm, options) {
-                Ok(model) => check_with_model(&doc, &model, &params, cl, &mut out),
+                Ok(model) => check_with_model(&doc, &model, &params, &closed, &mut out),
                 Err(e) => doc.error("arm", arm_line, &e, &mut out),
             }
         }
-        match closed {
-            Some(closed) if out.is_empty() => Ok(Scenario {
+        match out.is_empty() {
+            true => Ok(Scenario {
                 source: source.to_string(),
                 text: text.to_string(),
                 description: head.description,
@@ -499,7 +506,7 @@ impl Scenario {
                 log,
                 seed: head.seed,
             }),
-            _ => {
+            false => {
                 out.sort_by_key(|p| p.line);
                 Err(out)
             }

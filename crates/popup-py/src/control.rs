@@ -6,7 +6,7 @@ use crate::model::PyModel;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use popup_core::control::config::parse_control;
-use popup_core::control::{gain_names, rollout_closed, ClosedLoop, Gains, Status, CTRL_CHANNELS, NCTRL, NG};
+use popup_core::control::{gain_names, rollout_closed, ClosedLoop, Gains, CTRL_CHANNELS, NCTRL, NG};
 use popup_core::effects::{Effects, NE};
 use popup_core::params::Params;
 use popup_core::sensor::NCH;

@@ -7,6 +7,7 @@ mod cli;
 mod control;
 mod errors;
 mod model;
+mod scenario;
 
 use pyo3::prelude::*;
 
@@ -26,6 +27,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("EFFECT_NAMES", popup_core::effects::EFFECT_NAMES.to_vec())?;
     m.add_function(wrap_pyfunction!(cli::run_cli, m)?)?;
     m.add_function(wrap_pyfunction!(control::closed_loop_rollout, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario::check_scenario, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario::scenario_set_key, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario::run_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(control::check_control, m)?)?;
     m.add_function(wrap_pyfunction!(control::control_channels, m)?)?;
     m.add_function(wrap_pyfunction!(control::py_gain_names, m)?)?;

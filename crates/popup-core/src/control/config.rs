@@ -141,7 +141,10 @@ fn error_what(e: &Error) -> Option<&str> {
 /// The message of a core error for a [`Problem`] (the key is given separately; a name in
 /// parentheses, such as the phase's, is kept).
 fn error_message(e: &Error) -> String {
-    let named = |what: &str, detail: String| if what.contains(" (") { format!("{what}: {detail}") } else { detail };
+    let named = |what: &str, detail: String| match (what.find(" ("), what.find(')')) {
+        (Some(a), Some(b)) if a < b => format!("{}: {detail}", &what[..=b]),
+        _ => detail,
+    };
     match e {
         Error::InvalidParameter { what, value, requirement } => named(what, format!("invalid value {value}: {requirement}")),
         Error::Input { what, message } => named(what, message.clone()),
@@ -276,13 +279,17 @@ impl<'a> Doc<'a> {
     /// A problem for a deserialization error inside `v` (at `path`).
     fn de_problem(&self, path: &str, v: &Val<'a>, e: &toml::de::Error) -> Problem {
         let msg = friendly(e.message());
-        if let Some(s) = e.span() {
-            return self.problem(&path_at(path, v, s.start), self.line_at(s.start), msg);
+        let (key, node, at) = match e.span() {
+            Some(s) => {
+                let (key, node) = node_at(path, v, s.start);
+                (key, node, s.start)
+            }
+            None => (path.to_string(), v, v.span().start),
+        };
+        match unknown_field(e.message()).and_then(|f| find_key(&key, node, f)) {
+            Some((key, at)) => self.problem(&key, self.line_at(at), msg),
+            None => self.problem(&key, self.line_at(at), msg),
         }
-        if let Some((key, at)) = unknown_field(e.message()).and_then(|f| find_key(path, v, f)) {
-            return self.problem(&key, self.line_at(at), msg);
-        }
-        self.problem(path, self.line_at(v.span().start), msg)
     }
 
     /// `v` as a table, or a problem.
@@ -356,32 +363,31 @@ fn line_at(text: &str, offset: usize) -> usize {
     text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
 }
 
-/// The key path of the deepest part of `v` (at `path`) whose key or value contains byte
-/// `offset`.
-fn path_at(path: &str, v: &Val<'_>, offset: usize) -> String {
+/// The key path and value of the deepest part of `v` (at `path`) whose key or value
+/// contains byte `offset`.
+fn node_at<'v, 'a>(path: &str, v: &'v Val<'a>, offset: usize) -> (String, &'v Val<'a>) {
     let inside = |s: std::ops::Range<usize>| s.start <= offset && offset < s.end.max(s.start + 1);
     match v.get_ref() {
         DeValue::Table(t) => {
             for (k, c) in t.iter() {
                 if inside(k.span()) {
-                    return join(path, k.get_ref());
+                    return (join(path, k.get_ref()), c);
                 }
                 if inside(c.span()) || contains_offset(c, offset) {
-                    return path_at(&join(path, k.get_ref()), c, offset);
+                    return node_at(&join(path, k.get_ref()), c, offset);
                 }
             }
-            path.to_string()
         }
         DeValue::Array(a) => {
             for (i, c) in a.iter().enumerate() {
                 if inside(c.span()) || contains_offset(c, offset) {
-                    return path_at(&format!("{path}[{i}]"), c, offset);
+                    return node_at(&format!("{path}[{i}]"), c, offset);
                 }
             }
-            path.to_string()
         }
-        _ => path.to_string(),
+        _ => {}
     }
+    (path.to_string(), v)
 }
 
 /// Whether any key or value below `v` contains byte `offset` (the children of a table
@@ -819,15 +825,16 @@ pub fn read_payload_radius(doc: &Doc<'_>, out: &mut Vec<Problem>) -> f64 {
 
 /// The control tables of `doc` (`[controller]`, `[faults]`, `[[phases]]`, `[[obstacles]]`,
 /// `payload_radius_m`) for `arm`, every part read and validated on its own. Problems are
-/// appended to `out`; `None` when any was found. Other top-level keys are not looked at.
-pub fn read_control(arm: &ArmSpec, doc: &Doc<'_>, out: &mut Vec<Problem>) -> Option<ControlFile> {
-    let n0 = out.len();
+/// appended to `out`; the result is only meaningful when none was found (bad phases and
+/// obstacles are left out, bad controller values are kept). Other top-level keys are not
+/// looked at.
+pub fn read_control(arm: &ArmSpec, doc: &Doc<'_>, out: &mut Vec<Problem>) -> ControlFile {
     let controller = read_controller(doc, out);
     let faults = read_faults(doc, out);
     let phases = read_phases(arm, doc, out);
     let obstacles = read_obstacles(doc, out);
     let payload_radius = read_payload_radius(doc, out);
-    (out.len() == n0).then(|| ControlFile { controller, sequence: Sequence { phases, faults }, obstacles, payload_radius })
+    ControlFile { controller, sequence: Sequence { phases, faults }, obstacles, payload_radius }
 }
 
 /// Problems as one [`Error::Input`] naming the file: one line per problem, in line order.
@@ -850,9 +857,11 @@ pub fn parse_control(model: &Model, text: &str, source: &str) -> Result<ControlF
     let doc = Doc::parse(text, source).map_err(|p| problems_error(source, &[p]))?;
     let mut out = Vec::new();
     doc.check_keys("", doc.root(), &CONTROL_KEYS, &mut out);
-    match read_control(&model.spec, &doc, &mut out) {
-        Some(cf) if out.is_empty() => Ok(cf),
-        _ => Err(problems_error(source, &out)),
+    let cf = read_control(&model.spec, &doc, &mut out);
+    if out.is_empty() {
+        Ok(cf)
+    } else {
+        Err(problems_error(source, &out))
     }
 }
 
