@@ -441,6 +441,9 @@ def test_cut_at_many_points_never_fails(tmp_path: Path, killed_run: Tuple[Path, 
             assert_prefix(log, full, done[-1].message_end_time)
         else:
             assert len(log.table) == 0
+    log = popup.read_log(cut(path, len(data) - 1, tmp_path / "cut.mcap"))
+    assert log.lost.startswith("file ends inside the closing magic, after the footer (no data is missing): only the closing magic is missing; ")
+    assert_prefix(log, full, 10**12)
 
 
 def test_cut_in_the_summary_with_run_end(tmp_path: Path) -> None:

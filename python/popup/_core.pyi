@@ -6,7 +6,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, final
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "closed_loop_rollout", "check_control", "control_channels", "gain_names", "EFFECT_NAMES", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
+__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "closed_loop_rollout", "check_control", "check_scenario", "scenario_set_key", "run_scenario", "control_channels", "gain_names", "EFFECT_NAMES", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
 
 __version__: str
 BUILD_PROFILE: str
@@ -41,6 +41,24 @@ def closed_loop_rollout(
     List[str],
     List[List[Tuple[int, float, float, float]]],
     List[List[str]],
+]: ...
+def check_scenario(text: str, source: str = "<scenario>", base_dir: str = ".") -> List[Tuple[str, int, str, str]]: ...
+def scenario_set_key(text: str, path: str, value: float) -> str: ...
+def run_scenario(
+    text: str,
+    source: str = "<scenario>",
+    base_dir: str = ".",
+    out: Optional[str] = None,
+    duration: Optional[float] = None,
+    seed: Optional[int] = None,
+) -> Tuple[
+    str,
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    List[Tuple[float, str, str, str, str]],
+    List[Tuple[int, float, float, float]],
+    List[str],
+    int,
 ]: ...
 
 EFFECT_NAMES: List[str]

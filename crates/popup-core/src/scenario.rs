@@ -20,6 +20,7 @@ use crate::error::Error;
 use crate::math::Vec3;
 use crate::model::{Disable, Integrator, Model, Options};
 use crate::params::{ParamData, Params};
+use crate::sim::{check_step, rest_state};
 use crate::spec::arm::ArmSpec;
 use serde::de::DeserializeOwned;
 use std::path::{Path, PathBuf};
@@ -256,7 +257,8 @@ fn numbers_or_one(doc: &Doc<'_>, key: &str, v: &Val<'_>, n: usize, out: &mut Vec
 }
 
 /// One `[effects.<name>]` table merged over the arm's values of that effect, each parameter
-/// checked for shape (one number sets every element of a per-joint or per-link parameter); then the effect is validated on its own. `None` on a problem.
+/// checked for shape (one number sets every element of a per-joint or per-link
+/// parameter); then the effect is validated on its own. `None` on a problem.
 fn merge_effect(doc: &Doc<'_>, name: &str, v: &Val<'_>, arm: &toml::Table, out: &mut Vec<Problem>) -> Option<toml::Table> {
     let path = format!("effects.{name}");
     let t = doc.table(&path, v, out)?;
@@ -425,21 +427,48 @@ fn check_timing(doc: &Doc<'_>, head: &Head, c: &ControllerSpec, out: &mut Vec<Pr
     dt
 }
 
-/// The checks that need the compiled model: parameters, closed-loop limits, Cartesian
-/// targets inside the workspace.
-fn check_with_model(doc: &Doc<'_>, model: &Model, params: &Params, closed: &ClosedLoop, out: &mut Vec<Problem>) {
-    if let Err(e) = ParamData::new(model, params) {
-        let top = match &e {
-            Error::InvalidParameter { what, .. } | Error::Input { what, .. } => what.split(['.', '[', ' ']).next().unwrap_or("").to_string(),
-            _ => String::new(),
-        };
-        let line = doc.locate(&top).1;
-        doc.error(&top, line, &e, out);
-    }
+/// The parameters derived for the model (payload, pressures and effects checked together);
+/// `None` on a problem.
+fn check_params(doc: &Doc<'_>, model: &Model, params: &Params, out: &mut Vec<Problem>) -> Option<ParamData> {
     if params.effects.backlash.gap != [0.0; 3] {
         let line = doc.locate("effects.backlash.gap").1;
         out.push(doc.problem("effects.backlash.gap", line, "backlash needs encoder replay: a closed-loop scenario cannot use it in this version"));
     }
+    match ParamData::new(model, params) {
+        Ok(pd) => Some(pd),
+        Err(e) => {
+            let top = error_root(&e);
+            doc.error(&top, doc.locate(&top).1, &e, out);
+            None
+        }
+    }
+}
+
+/// The first step of the key path an error names (`payload_kg`, `effects`, ...).
+fn error_root(e: &Error) -> String {
+    match e {
+        Error::InvalidParameter { what, .. } | Error::Input { what, .. } => what.split(['.', '[', ' ']).next().unwrap_or("").to_string(),
+        _ => String::new(),
+    }
+}
+
+/// The start of the run: the rest state at `q0` exists and `dt` is stable for the
+/// linearised arm there (what the run checks first).
+fn check_start(doc: &Doc<'_>, model: &Model, pd: &ParamData, closed: &ClosedLoop, out: &mut Vec<Problem>) {
+    let line = |k: &str| doc.entry(doc.root(), k).map_or(0, |e| e.0);
+    match rest_state(model, pd, 0.0, closed.q0) {
+        Err(e) => out.push(doc.problem("q0", line("q0"), format!("no rest state at q0: {e}"))),
+        Ok(st) => {
+            if let Err(e) = check_step(model, pd, &st.q, false) {
+                let (key, l) = if line("dt") > 0 { ("dt", line("dt")) } else { ("controller.rate_hz", doc.locate("controller.rate_hz").1) };
+                out.push(doc.problem(key, l, e.to_string()));
+            }
+        }
+    }
+}
+
+/// Every Cartesian target inside the rigid workspace of the model's chain.
+fn check_targets(doc: &Doc<'_>, model: &Model, closed: &ClosedLoop, out: &mut Vec<Problem>) {
     let Ok(rigid) = rigid_equivalent(model) else { return };
     for (i, ph) in closed.sequence.phases.iter().enumerate() {
         if let Command::Cartesian { target } = ph.command {
@@ -450,6 +479,15 @@ fn check_with_model(doc: &Doc<'_>, model: &Model, params: &Params, closed: &Clos
             }
         }
     }
+}
+
+/// The checks that need the compiled model: parameters, the start of the run (rest state,
+/// stable step), Cartesian targets inside the workspace.
+fn check_with_model(doc: &Doc<'_>, model: &Model, params: &Params, closed: &ClosedLoop, out: &mut Vec<Problem>) {
+    if let Some(pd) = check_params(doc, model, params, out) {
+        check_start(doc, model, &pd, closed, out);
+    }
+    check_targets(doc, model, closed, out);
 }
 
 impl Scenario {
@@ -491,26 +529,24 @@ impl Scenario {
                 Err(e) => doc.error("arm", arm_line, &e, &mut out),
             }
         }
-        match out.is_empty() {
-            true => Ok(Scenario {
-                source: source.to_string(),
-                text: text.to_string(),
-                description: head.description,
-                arm,
-                arm_name: head.arm_name,
-                arm_file,
-                options,
-                params,
-                closed,
-                noise,
-                log,
-                seed: head.seed,
-            }),
-            false => {
-                out.sort_by_key(|p| p.line);
-                Err(out)
-            }
+        if !out.is_empty() {
+            out.sort_by_key(|p| p.line);
+            return Err(out);
         }
+        Ok(Scenario {
+            source: source.to_string(),
+            text: text.to_string(),
+            description: head.description,
+            arm,
+            arm_name: head.arm_name,
+            arm_file,
+            options,
+            params,
+            closed,
+            noise,
+            log,
+            seed: head.seed,
+        })
     }
 
     /// Read and parse a scenario file (arm files relative to its folder).

@@ -287,6 +287,13 @@ fn cartesian_targets_out_of_reach_are_refused_at_parse_time() {
 }
 
 #[test]
+fn a_step_too_large_for_the_arm_is_found_at_parse_time() {
+    let p = parse("duration_s = 1.0\ndt = 0.05\nsample_rate_hz = 20.0\n[controller]\nrate_hz = 20.0\n").unwrap_err();
+    assert_eq!(found(&p), [(2, "dt".to_string())], "{p:#?}");
+    assert!(p[0].message.contains("too large"), "{}", p[0]);
+}
+
+#[test]
 fn set_key_edits_the_text_in_place() {
     let text = "# my run\nduration_s = 1.0 # comment kept\npressure_pa = [30000.0, 30000.0]\nseed = 3\n\n[controller]\nrate_hz = 10000.0\n\n[[phases]]\nkind = \"ready\"\nuntil = { min_time = 1.0 }\n";
     // an existing scalar
