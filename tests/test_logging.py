@@ -264,6 +264,13 @@ def test_sweep_grid_matches_single_runs_and_thread_counts(tmp_path: Path) -> Non
             rows[threads] = list(csv.DictReader(f))
         assert len(rows[threads]) == 6 and len(list(d.glob("run_*.mcap"))) == 6
     assert rows["1"] == rows["2"]
+    import pandas as pd
+
+    d = tmp_path / "sweep_pq"
+    r = subprocess.run(popup_cmd("sweep", str(sc_path), "--param", "payload_kg=0,0.5", "--out", str(d), "--parquet"), capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    pq = pd.read_parquet(d / "summary.parquet")
+    assert list(pq["payload_kg"]) == [0.0, 0.5] and pq.equals(pd.read_csv(d / "summary.csv"))
     row = rows["1"][3]  # payload 0.5 (second value), pressure 40000 (second value)
     assert float(row["payload_kg"]) == 0.5 and float(row["pressure_pa"]) == 40000.0 and row["status"] == "completed"
     single = popup.Scenario.read(sc_path).set("payload_kg", 0.5).set("pressure_pa", 40000.0).run()

@@ -53,7 +53,27 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return _run_python(rest[0], ["--help"])
     if cmd in PYTHON_COMMANDS:
         return _run_python(cmd, rest)
+    if cmd == "sweep" and "--parquet" in rest:
+        return _sweep_parquet(rest)
     return run_rust(args)
+
+
+def _sweep_parquet(rest: List[str]) -> int:
+    """``popup sweep ... --parquet``: the Rust sweep writes ``summary.csv``; the summary is
+    also written as ``summary.parquet`` (pyarrow), with the same columns and values."""
+    args = [a for a in rest if a != "--parquet"]
+    code = run_rust(["sweep", *args])
+    out = next((a.split("=", 1)[1] for a in args if a.startswith("--out=")), None)
+    if out is None and "--out" in args and args.index("--out") + 1 < len(args):
+        out = args[args.index("--out") + 1]
+    csv = None if out is None else os.path.join(out, "summary.csv")
+    if code in (0, 1) and csv is not None and os.path.isfile(csv):
+        import pandas as pd
+
+        pq = os.path.join(out or ".", "summary.parquet")
+        pd.read_csv(csv).to_parquet(pq, index=False)
+        print(f"{PROG}: summary also written as {pq}", file=sys.stderr)
+    return code
 
 
 def run_rust(args: Sequence[str]) -> int:

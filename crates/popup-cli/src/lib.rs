@@ -98,6 +98,10 @@ enum Cmd {
         /// Seed of the sensor noise, the same for every run (default: the scenario's).
         #[arg(long)]
         seed: Option<u64>,
+        /// Also write DIR/summary.parquet (done by the Python front end, `pip install`ed
+        /// `popup`; this binary alone writes summary.csv and refuses the flag).
+        #[arg(long)]
+        parquet: bool,
     },
     /// Validate a scenario file and list every problem (file:line: key: message).
     Check {
@@ -270,7 +274,13 @@ fn go(cli: Cli) -> popup_core::Result<i32> {
                 1.0 / sc.closed.sample_period
             );
         }
-        Cmd::Sweep { scenario, params, out, mcap, threads, duration, seed } => {
+        Cmd::Sweep { parquet: true, .. } => {
+            return Err(popup_core::Error::input(
+                "--parquet",
+                "the Parquet summary is written by the Python front end (the `popup` command `pip install` puts on PATH); this binary writes summary.csv only",
+            ))
+        }
+        Cmd::Sweep { scenario, params, out, mcap, threads, duration, seed, parquet: false } => {
             let axes = params.iter().map(|p| sweep::parse_axis(p)).collect::<popup_core::Result<Vec<_>>>()?;
             let (stop, ids) = StopFlags::register();
             let res = sweep::sweep(&scenario, &axes, &out, mcap, threads, duration, seed, &stop);
