@@ -278,3 +278,11 @@ def test_sweep_grid_matches_single_runs_and_thread_counts(tmp_path: Path) -> Non
     assert float(row["ee_z"]) == float(single.channel("ee_z")[-1])
     log = popup.read_log(tmp_path / "sweep1" / "run_0003.mcap")
     assert np.array_equal(log.table["imu2_az"].to_numpy(), single.channel("imu2_az"))
+
+
+def test_documented_scenario_example_is_valid() -> None:
+    text = (ROOT / "docs" / "logging.md").read_text()
+    block = text.split("## Scenario files", 1)[1].split("```toml\n", 1)[1].split("```", 1)[0]
+    sc = popup.Scenario.from_toml(block, "docs/logging.md")
+    assert sc.duration_s == 10.0 and sc.phase_names() == ["Holding"]
+    assert sc.set("payload_kg", 2.0).to_dict()["payload_kg"] == 2.0

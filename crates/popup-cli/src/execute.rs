@@ -4,8 +4,8 @@
 use crate::progress::{Progress, Watch};
 use popup_core::control::closed_loop::{run_closed_loop_into, Status, NCTRL};
 use popup_core::control::machine::Event;
-use popup_core::log::{LogOptions, McapLogger, RunMeta, TOPIC_NAMES};
-use popup_core::scenario::{Compression as ScCompression, Scenario};
+use popup_core::log::{McapLogger, RunMeta};
+use popup_core::scenario::Scenario;
 use popup_core::sensor::NCH;
 use popup_core::stream::{Flow, Noisy, Sink, StateView, Tee};
 use popup_core::{Error, Result};
@@ -88,21 +88,6 @@ pub struct Outcome {
     pub alarms: Vec<popup_core::sim::Alarm>,
 }
 
-/// The scenario's `[log]` table as logger options.
-pub fn log_options(sc: &Scenario) -> LogOptions {
-    let l = &sc.log;
-    LogOptions {
-        viz_rate_hz: l.viz_rate_hz,
-        flush_every_s: l.flush_every_s,
-        compression: match l.compression {
-            ScCompression::Zstd => popup_core::log::Compression::Zstd,
-            ScCompression::Lz4 => popup_core::log::Compression::Lz4,
-            ScCompression::None => popup_core::log::Compression::None,
-        },
-        chunk_size_bytes: l.chunk_size_bytes,
-        topics: l.topics.iter().filter(|t| TOPIC_NAMES.contains(&t.as_str())).cloned().collect(),
-    }
-}
 
 /// Run `sc` (its duration and seed as given), logging to `out` when set; `progress`
 /// reports and carries the stop flag.
@@ -119,7 +104,7 @@ pub fn execute(sc: &Scenario, out: Option<&Path>, progress: &mut Progress, extra
         Some(p) => {
             let f = std::fs::File::create(p).map_err(|e| Error::Log { path: p.display().to_string(), message: format!("cannot create: {e}") })?;
             let w = std::io::BufWriter::with_capacity(1 << 16, f);
-            Some(McapLogger::new(w, &p.display().to_string(), &model, &log_options(sc), &meta, sc.closed.sample_period, sc.closed.payload_radius)?)
+            Some(McapLogger::new(w, &p.display().to_string(), &model, &sc.log, &meta, sc.closed.sample_period, sc.closed.payload_radius)?)
         }
         None => None,
     };

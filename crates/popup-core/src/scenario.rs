@@ -667,8 +667,9 @@ fn first_header(text: &str, t: &DeTable<'_>) -> usize {
 fn last_root_value(t: &DeTable<'_>, limit: usize) -> Option<usize> {
     t.iter()
         .filter(|(k, _)| k.span().start < limit)
-        .map(|(_, v)| match v.get_ref() {
-            DeValue::Table(sub) if v.span().end <= limit => last_root_value(sub, limit).unwrap_or(v.span().end),
+        .map(|(k, v)| match v.get_ref() {
+            // a table made by dotted keys (`a.b = 1`): its last value
+            DeValue::Table(sub) if v.span() == k.span() => last_root_value(sub, limit).unwrap_or(v.span().end),
             _ => v.span().end,
         })
         .filter(|&e| e <= limit)
@@ -680,7 +681,7 @@ fn after_line(text: &str, at: usize) -> usize {
     text[at..].find('\n').map_or(text.len(), |i| at + i + 1)
 }
 
-/// Insert `line` (a `key = value` pair) into the table at `anchor`.
+/// Insert `pair` (`key = value`) into the table at `anchor`.
 fn insert_at(text: &str, root: &DeTable<'_>, anchor: Anchor, pair: &str) -> String {
     let (pos, piece) = match anchor {
         Anchor::Root => {

@@ -39,8 +39,6 @@ pub const TOPICS: [Topic; 7] = [
     Topic { key: "control", topic: "/popup/control", schema: "popup.Control", source: Source::Control, cols: (3, 17) },
 ];
 
-/// Every topic key of `[log] topics` (the sample topics, then `events`, `scene`, `log`).
-pub const TOPIC_NAMES: [&str; 10] = ["joints", "imu", "end_effector", "pressure", "bending", "reference", "control", "events", "scene", "log"];
 
 const CTRL_UNITS: [&str; 17] =
     ["rad", "rad", "rad", "rad/s", "rad/s", "rad/s", "rad/s", "rad/s", "rad/s", "m/s²", "m/s²", "m/s²", "N·m", "N·m", "N·m", "1", "m"];
