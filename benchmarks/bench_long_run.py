@@ -278,7 +278,7 @@ def main() -> int:
         print(f"  peak RSS                  : {peak / 1024:.1f} MiB (max sampled {peak_sampled / 1024:.1f} MiB, kernel VmHWM {hwm / 1024:.1f} MiB)")
         print(
             f"  RSS at 10 % vs 100 %      : {r10[2] / 1024:.1f} MiB (t = {r10[1]:.0f} s) -> {r100[2] / 1024:.1f} MiB (t = {r100[1]:.0f} s): "
-            f"{d_mib:+.2f} MiB, ratio {ratio:.3f}"
+            f"{d_mib:+.2f} MiB ({r100[2] - r10[2]:+d} KiB), ratio {ratio:.3f}"
         )
         print(f"  wall time                 : {wall:.1f} s (process start to exit; first progress line after {t_first:.2f} s)")
         print(f"  simulated s per wall s    : {dur / wall:.1f} (the child's own last figure: {last_speed:.1f}x real time)")

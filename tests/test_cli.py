@@ -17,7 +17,7 @@ import pytest
 import popup
 from popup import cli
 
-RUST_COMMANDS = ["info", "arm", "statics", "hold"]
+RUST_COMMANDS = ["info", "run", "sweep", "check", "arm", "statics", "hold"]
 
 
 def _script():

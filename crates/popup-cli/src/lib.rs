@@ -298,6 +298,7 @@ fn go(cli: Cli) -> popup_core::Result<i32> {
             println!("build profile: {}", if cfg!(debug_assertions) { "debug" } else { "release" });
             println!("features: {}", popup_core::BUILD_FEATURES.join(", "));
             println!("built-in arms: {}", ArmSpec::BUILTIN.join(", "));
+            println!("scenario format: {}; log: MCAP (zstd, lz4), Foxglove JSON schemas", popup_core::scenario::SCENARIO_FORMAT);
         }
         Cmd::Arm { arm } => print!("{}", load_arm(&arm)?.to_toml()),
         Cmd::Statics { a } => {

@@ -40,4 +40,6 @@ pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 pub const BUILD_FEATURES: &[&str] = &[
     #[cfg(feature = "parallel")]
     "parallel",
+    #[cfg(feature = "mcap")]
+    "mcap",
 ];
