@@ -3,7 +3,8 @@
 
 use crate::drive::{Drive, Spline3};
 use crate::effects::play;
-use crate::stream::{Collect, Delay, DelayLine};
+use crate::control::machine::Event;
+use crate::stream::{either, Collect, Delay, DelayLine, Flow, Sink, StateView};
 use crate::error::{Error, Result};
 use crate::forward::prescribe;
 use crate::integrate::{step_with, Workspace};
@@ -195,6 +196,47 @@ pub(crate) fn track_alarms(open: &mut [Option<usize>; 2], alarms: &mut Vec<Alarm
 /// Bad config ([`Error::Input`]), [`Error::StepTooLarge`], [`Error::Diverged`], or the
 /// static-equilibrium error for the initial state.
 pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory> {
+    let mut col = Collect::default();
+    let end = run_into(model, pd, cfg, &mut col)?;
+    Ok(Trajectory { data: col.data, nsample: end.nsample, alarms: end.alarms, final_state: end.final_state, warnings: pd.warnings.clone() })
+}
+
+/// How a streamed open-loop run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OpenEnd {
+    /// Samples handed to the sink (fewer than the full run when the sink stopped it).
+    pub nsample: usize,
+    /// Wrinkling-alarm episodes in time order.
+    pub alarms: Vec<Alarm>,
+    /// State at the end of the run.
+    pub final_state: State,
+}
+
+/// The wrinkling-alarm onsets and ends between two tracker states, as events.
+pub(crate) fn alarm_events(before: [Option<usize>; 2], open: [Option<usize>; 2], alarms: &[Alarm], t: f64, sink: &mut dyn Sink) -> Result<Flow> {
+    let mut flow = Flow::Go;
+    for l in 0..2 {
+        if open[l] != before[l] {
+            let a = &alarms[open[l].or(before[l]).expect("one of them is open")];
+            let (kind, detail) = if open[l].is_some() {
+                ("wrinkle_start", format!("|M|/M_w > 1 on link {} (wrinkling)", l + 1))
+            } else {
+                ("wrinkle_end", format!("|M|/M_w back below 1 on link {}; episode from t = {:.4} s, peak {:.3}", l + 1, a.t_start, a.peak_ratio))
+            };
+            let link = format!("link {}", l + 1);
+            flow = either(flow, sink.event(&Event { t, kind, from: link.clone(), to: link, detail })?);
+        }
+    }
+    Ok(flow)
+}
+
+/// [`run`] streamed: the true state at every sample time, the samples (after the sensor
+/// delays) and the wrinkling-alarm events go to `sink` as they are produced; memory does
+/// not grow with the duration. A sink returning [`Flow::Stop`] ends the run there.
+///
+/// # Errors
+/// As [`run`], and the sink's errors.
+pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn Sink) -> Result<OpenEnd> {
     let dt = model.options.dt;
     let (t0, duration) = match (&cfg.drive, cfg.duration) {
         (Drive::Replay(s), d) => {
@@ -251,42 +293,6 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
     if cfg.check_step {
         check_step(model, pd, &st.q, cfg.drive.is_replay())?;
     }
-    let nsample = nstep / every + 1;
-    let mut data = vec![0.0; nsample * NCH];
-    let mut alarms: Vec<Alarm> = Vec::new();
-    let mut open: [Option<usize>; 2] = [None, None];
-    let write = |k: usize, st: &State, data: &mut Vec<f64>| {
-        let mut q = st.q;
-        let mut v = st.v;
-        let am = prescribe(model, &cfg.drive, st.t, &mut q, &mut v);
-        let r = k / every;
-        let row = &mut data[r * NCH..(r + 1) * NCH];
-        sample(model, pd, &cfg.drive, st.t, &q, &v, am, row);
-        if let Some(enc) = &encoder {
-            let (qe, ve, _) = enc.eval(st.t);
-            row[1..4].copy_from_slice(&qe);
-            row[4..7].copy_from_slice(&ve);
-        }
-    };
-    let mut track = |st: &State, alarms: &mut Vec<Alarm>| {
-        let (_, ratio) = bending_moments(model, pd, st.t, &st.q, &st.v);
-        track_alarms(&mut open, alarms, st.t, ratio);
-    };
-    write(0, &st, &mut data);
-    track(&st, &mut alarms);
-    let mut ws = Workspace::new();
-    for k in 0..nstep {
-        let t = t0 + k as f64 * dt;
-        step_with(model, pd, &cfg.drive, t, dt, &mut st.q, &mut st.v, &mut ws);
-        st.t = t0 + (k + 1) as f64 * dt;
-        if let Some(e) = diverged(model, k, t, &st.q, &st.v) {
-            return Err(e);
-        }
-        track(&st, &mut alarms);
-        if (k + 1) % every == 0 {
-            write(k + 1, &st, &mut data);
-        }
-    }
     let sd = &fx.sensor_delay;
     let enc = if cfg.drive.is_replay() { 0.0 } else { sd.encoder };
     let mut line = DelayLine::new(
@@ -298,15 +304,49 @@ pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory>
             Delay { cols: 1..7, delay: enc },
         ],
     );
-    if !line.is_identity() {
-        let mut col = Collect::with_capacity(nsample);
-        for r in data.chunks_exact(NCH) {
-            line.push(r.try_into().expect("rows of NCH"), None, &mut col)?;
+    let mut alarms: Vec<Alarm> = Vec::new();
+    let mut open: [Option<usize>; 2] = [None, None];
+    let mut row = [0.0; NCH];
+    let mut nsample = 0usize;
+    let mut write = |st: &State, row: &mut [f64; NCH], sink: &mut dyn Sink| -> Result<Flow> {
+        let mut q = st.q;
+        let mut v = st.v;
+        let f = sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd })?;
+        let am = prescribe(model, &cfg.drive, st.t, &mut q, &mut v);
+        sample(model, pd, &cfg.drive, st.t, &q, &v, am, row);
+        if let Some(enc) = &encoder {
+            let (qe, ve, _) = enc.eval(st.t);
+            row[1..4].copy_from_slice(&qe);
+            row[4..7].copy_from_slice(&ve);
         }
-        line.finish(&mut col)?;
-        data = col.data;
+        nsample += 1;
+        Ok(either(f, line.push(row, None, sink)?))
+    };
+    let mut track = |st: &State, alarms: &mut Vec<Alarm>, sink: &mut dyn Sink| -> Result<Flow> {
+        let (_, ratio) = bending_moments(model, pd, st.t, &st.q, &st.v);
+        let before = open;
+        track_alarms(&mut open, alarms, st.t, ratio);
+        alarm_events(before, open, alarms, st.t, sink)
+    };
+    let mut flow = either(track(&st, &mut alarms, sink)?, write(&st, &mut row, sink)?);
+    let mut ws = Workspace::new();
+    for k in 0..nstep {
+        if flow == Flow::Stop {
+            break;
+        }
+        let t = t0 + k as f64 * dt;
+        step_with(model, pd, &cfg.drive, t, dt, &mut st.q, &mut st.v, &mut ws);
+        st.t = t0 + (k + 1) as f64 * dt;
+        if let Some(e) = diverged(model, k, t, &st.q, &st.v) {
+            return Err(e);
+        }
+        flow = track(&st, &mut alarms, sink)?;
+        if (k + 1) % every == 0 {
+            flow = either(flow, write(&st, &mut row, sink)?);
+        }
     }
-    Ok(Trajectory { data, nsample, alarms, final_state: st, warnings: pd.warnings.clone() })
+    line.finish(sink)?;
+    Ok(OpenEnd { nsample, alarms, final_state: st })
 }
 
 /// The drive the physics sees under `backlash` and an encoder `sensor_delay` in replay:

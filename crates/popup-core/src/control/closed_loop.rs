@@ -18,7 +18,7 @@ use crate::math::{MatN, Vec3, VecN};
 use crate::model::Model;
 use crate::params::{ParamData, Params};
 use crate::sensor::{bending_moments, sample, NCH};
-use crate::sim::{check_step, diverged, rest_state, track_alarms, Alarm, State, Trajectory};
+use crate::sim::{alarm_events, check_step, diverged, rest_state, track_alarms, Alarm, State, Trajectory};
 use crate::stream::{either, Collect, Delay, DelayLine, Flow, Sink, StateView};
 use crate::statics::gravity_torque;
 
@@ -564,17 +564,7 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
         let (_, rt) = bending_moments(model, &pd, st.t, &st.q, &st.v);
         let before = open;
         track_alarms(&mut open, &mut alarms, st.t, rt);
-        for l in 0..2 {
-            if open[l] != before[l] {
-                let a = &alarms[open[l].or(before[l]).expect("one of them is open")];
-                let (kind, detail) = if open[l].is_some() {
-                    ("wrinkle_start", format!("|M|/M_w > 1 on link {} (wrinkling)", l + 1))
-                } else {
-                    ("wrinkle_end", format!("|M|/M_w back below 1 on link {}; episode from t = {:.4} s, peak {:.3}", l + 1, a.t_start, a.peak_ratio))
-                };
-                sink.event(&Event { t: st.t, kind, from: format!("link {}", l + 1), to: format!("link {}", l + 1), detail })?;
-            }
-        }
+        alarm_events(before, open, &alarms, st.t, sink)?;
         k += 1;
     }
     if line.finish(sink)? == Flow::Stop && status == Status::Completed && nsample < nsample_full {
