@@ -286,3 +286,28 @@ def test_documented_scenario_example_is_valid() -> None:
     sc = popup.Scenario.from_toml(block, "docs/logging.md")
     assert sc.duration_s == 10.0 and sc.phase_names() == ["Holding"]
     assert sc.set("payload_kg", 2.0).to_dict()["payload_kg"] == 2.0
+
+
+def test_open_loop_replay_and_torque_runs_are_logged(tmp_path: Path) -> None:
+    model = popup.Model("popup-lab", payload_kg=1.0)
+    t = np.arange(0.0, 2.0, 0.002)
+    q = np.stack([0 * t, 0.6 * np.minimum(t, 1.0), -0.3 * np.minimum(t, 1.0)], axis=1)
+    out = tmp_path / "replay.mcap"
+    res = model.replay(t, q, sample_rate=100, log=out)
+    plain = model.replay(t, q, sample_rate=100)
+    assert np.array_equal(res.data, plain.data)  # logging does not change the run
+    log = popup.read_log(out)
+    assert log.complete and log.run_end["status"] == "completed"
+    for i, c in enumerate(CHANNELS):
+        assert np.array_equal(log.table[c].to_numpy(), res.data[:, i]), c
+    assert log.topics.get("/popup/control", 0) == 0 and log.topics["/tf"] > 0  # no controller in open loop
+    mcap_check.validate_file(out)
+    run = popup.read_run(out)  # an encoder replay of the logged run reproduces it
+    assert run.replay == "encoder" and run.payload_kg == 1.0
+    again = run.model().replay(*run.encoder(), sample_rate=100)
+    assert np.allclose(again.channel("imu2_az"), res.channel("imu2_az"), atol=1e-6)
+    tq = tmp_path / "torque.mcap"
+    r2 = model.simulate(model.holding_torque((0.0, 0.6, -0.3)), duration=0.5, initial_q=model.rest_state((0.0, 0.6, -0.3)), log=tq)
+    assert np.array_equal(popup.read_log(tq).table["q2"].to_numpy(), r2.channel("q2"))
+    with pytest.raises(popup.InputError, match="one run"):
+        model.rollout(payload_kg=[0.0, 1.0], encoder_t=t, encoder_q=q, log=tmp_path / "b.mcap")

@@ -149,4 +149,6 @@ class Model:
         threads: int = 0,
         check_step: bool = True,
         effects: Optional[_F] = None,
+        log: Optional[str] = None,
+        log_experiment: str = "",
     ) -> Tuple[_F, List[Optional[Tuple[str, str]]], List[List[Tuple[int, float, float, float]]], List[List[str]]]: ...

@@ -307,6 +307,7 @@ class Model:
         initial_v: Any = None,
         sample_rate: float = 500.0,
         check_step: bool = True,
+        log: Optional[Union[str, "os.PathLike[str]"]] = None,
     ) -> SimResult:
         """Torque-driven run: motor torques in, full motion out.
 
@@ -323,6 +324,9 @@ class Model:
             motors at 0 and the bending joints in static equilibrium.
         sample_rate : float
             Output rate [Hz]; 1/sample_rate must be a multiple of ``dt``.
+        log : path, optional
+            MCAP file the run is streamed into as it runs (``docs/logging.md``);
+            :func:`popup.read_log` gives back the same arrays.
         """
         return self.rollout(
             torque=torque,
@@ -333,6 +337,7 @@ class Model:
             sample_rate=sample_rate,
             threads=1,
             check_step=check_step,
+            log=log,
         )[0]
 
     def replay(
@@ -344,13 +349,15 @@ class Model:
         initial_v: Any = None,
         sample_rate: float = 500.0,
         check_step: bool = True,
+        log: Optional[Union[str, "os.PathLike[str]"]] = None,
     ) -> SimResult:
         """Encoder-driven replay: the motor joints follow ``q`` (N, 3) [rad] at times ``t``
         (N,) [s] exactly (natural cubic spline: consistent q, q̇, q̈); the bending joints
         are integrated; the motor torques needed are an output.
 
         By default the run starts at rest: bending joints in static equilibrium at the
-        first encoder sample.
+        first encoder sample. ``log``: an MCAP file the run is streamed into
+        (``docs/logging.md``).
         """
         return self.rollout(
             encoder_t=t,
@@ -360,6 +367,7 @@ class Model:
             sample_rate=sample_rate,
             threads=1,
             check_step=check_step,
+            log=log,
         )[0]
 
     def rollout(
@@ -379,6 +387,7 @@ class Model:
         check_step: bool = True,
         raise_on_error: bool = True,
         effects: Any = None,
+        log: Optional[Union[str, "os.PathLike[str]"]] = None,
     ) -> BatchResult:
         """Batched rollouts in parallel (Rust, GIL released), bit-identical to running the
         runs one by one and for any ``threads``.
@@ -393,7 +402,7 @@ class Model:
         effect parameters across the batch; default the model's own effects.
 
         A failed run raises its error (``raise_on_error``) or leaves NaN rows with the
-        message in ``errors``.
+        message in ``errors``. ``log``: an MCAP file to stream a single run (B = 1) into.
         """
         replay = encoder_q is not None or encoder_t is not None
         if replay and torque is not None:
@@ -447,6 +456,19 @@ class Model:
         fx_b = None if effects is None else np.ascontiguousarray(_tile("effects", np.asarray(effects, dtype=np.float64), nb, 1))
         if not (np.isfinite(sample_rate) and sample_rate > 0):
             raise InputError(f"input sample_rate: {sample_rate} Hz must be finite and > 0")
+        log_exp = ""
+        if log is not None:
+            import tomli_w
+            from types import SimpleNamespace
+
+            from .io import sim_experiment
+
+            desc = self.describe()
+            desc.update({"payload_kg": float(pay_b[0]), "pressure_pa": pres_b[0], "drive": drive, "sample_rate_hz": float(sample_rate)})
+            exp = sim_experiment(SimpleNamespace(params=desc))  # type: ignore[arg-type]
+            if not replay:
+                exp["description"] += "; torque-driven: replay it with the logged torques, not the encoder"
+            log_exp = tomli_w.dumps(exp)
         data, errors, alarms, warns = self._m.rollout(
             np.ascontiguousarray(pay_b),
             np.ascontiguousarray(pres_b),
@@ -460,6 +482,8 @@ class Model:
             int(threads),
             bool(check_step),
             fx_b,
+            None if log is None else os.fspath(log),
+            log_exp,
         )
         err_msgs: List[Optional[str]] = [None if e is None else e[1] for e in errors]
         _report(errors, warns, raise_on_error)

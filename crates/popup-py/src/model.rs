@@ -229,7 +229,9 @@ impl PyModel {
     /// [[(link, t_start, t_end, peak_ratio)]], warnings [[str]]). Failed rows are NaN.
     /// effects (B, NE) or None: flat effect parameters per job (registry order, see
     /// `effect_registry()`); None = the arm's `[effects]`.
-    #[pyo3(signature = (payload_kg, pressure_pa, drive, times, values, initial_q = None, initial_v = None, duration = None, sample_period = 1e-3, threads = 0, check_step = true, effects = None))]
+    /// log: MCAP path to stream the run into (B must be 1), with `log_experiment` the
+    /// measured-run experiment TOML of its `experiment` metadata record.
+    #[pyo3(signature = (payload_kg, pressure_pa, drive, times, values, initial_q = None, initial_v = None, duration = None, sample_period = 1e-3, threads = 0, check_step = true, effects = None, log = None, log_experiment = String::new()))]
     #[allow(clippy::too_many_arguments)]
     fn rollout<'py>(
         &self,
@@ -246,6 +248,8 @@ impl PyModel {
         threads: usize,
         check_step: bool,
         effects: Option<PyReadonlyArray2<'py, f64>>,
+        log: Option<String>,
+        log_experiment: String,
     ) -> PyResult<RolloutOut<'py>> {
         let bad = |m: String| make(py, "InputError", &m);
         let payload = payload_kg.as_array().to_owned();
@@ -310,7 +314,11 @@ impl PyModel {
             });
         }
         let model = self.m.clone();
-        let results = py.detach(move || rollout(&model, &jobs, threads));
+        let results = match log {
+            None => py.detach(move || rollout(&model, &jobs, threads)),
+            Some(path) if nb == 1 => vec![py.detach(move || logged(&model, &jobs[0], &path, log_experiment))],
+            Some(_) => return Err(bad(format!("input log: one MCAP file logs one run; got a batch of {nb}"))),
+        };
         let ns = crate::errors::batch_nsample(&results, |t| t.nsample)?;
         let mut data = Array3::<f64>::from_elem((nb, ns, NCH), f64::NAN);
         let mut errors = Vec::with_capacity(nb);
@@ -349,4 +357,26 @@ impl PyModel {
 #[allow(clippy::type_complexity)]
 pub fn effect_registry() -> Vec<(&'static str, &'static str, &'static str, usize, f64, f64, f64, bool, bool, &'static str)> {
     popup_core::effects::PARAMS.iter().map(|p| (p.effect, p.name, p.unit, p.len, p.neutral, p.lo, p.hi, p.fit, p.integer, p.doc)).collect()
+}
+
+/// One open-loop run streamed into an MCAP log and collected.
+fn logged(model: &Model, job: &Job, path: &str, experiment: String) -> popup_core::Result<popup_core::sim::Trajectory> {
+    use popup_core::log::{LogOptions, McapLogger, RunMeta};
+    use popup_core::stream::{Collect, Tee};
+    let pd = ParamData::new(model, &job.params)?;
+    let f = std::fs::File::create(path).map_err(|e| popup_core::Error::Log { path: path.to_string(), message: format!("cannot create: {e}") })?;
+    let meta = RunMeta { experiment_toml: experiment, ..RunMeta::default() };
+    let mut lg = McapLogger::new(std::io::BufWriter::new(f), path, model, &LogOptions::default(), &meta, job.run.sample_period, 0.05)?;
+    let mut col = Collect::default();
+    let res = popup_core::sim::run_into(model, &pd, &job.run, &mut Tee { a: &mut col, b: &mut lg });
+    match res {
+        Ok(end) => {
+            lg.finish("completed")?;
+            Ok(popup_core::sim::Trajectory { data: col.data, nsample: end.nsample, alarms: end.alarms, final_state: end.final_state, warnings: pd.warnings.clone() })
+        }
+        Err(e) => {
+            let _ = lg.finish("failed");
+            Err(e)
+        }
+    }
 }
