@@ -169,7 +169,7 @@ def test_sigkill_loses_at_most_the_last_flush_interval(tmp_path: Path) -> None:
     assert "did not finish" in log.lost or "no run_end" in log.lost, log.lost
     t_read = float(log.table["t"].iloc[-1])
     # everything announced as flushed is there (the sensor rows lag their state by <= 1 sample)
-    assert t_read >= flushed[-1] - 0.01 - 1e-9, (t_read, flushed)
+    assert t_read >= flushed[-1] - 1e-9, (t_read, flushed)
     # and it is the start of the same run, bit for bit
     sc = popup.Scenario.read(tmp_path / "hold.toml")
     res = sc.run(duration=t_read)
@@ -311,3 +311,24 @@ def test_open_loop_replay_and_torque_runs_are_logged(tmp_path: Path) -> None:
     assert np.array_equal(popup.read_log(tq).table["q2"].to_numpy(), r2.channel("q2"))
     with pytest.raises(popup.InputError, match="one run"):
         model.rollout(payload_kg=[0.0, 1.0], encoder_t=t, encoder_q=q, log=tmp_path / "b.mcap")
+
+
+def test_second_run_in_one_python_process_still_finishes_on_ctrl_c(tmp_path: Path) -> None:
+    """The handlers are installed once per process and re-armed per run: a second CLI run
+    in the same Python process (a notebook, a script calling popup.cli.main twice) still
+    finishes its file on SIGINT, and exits 130."""
+    sc = hold_file(tmp_path, duration=600.0, flush=0.5)
+    first, second = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    script = (
+        "import sys, popup.cli as c\n"
+        f"c.main(['run', {str(sc)!r}, '--out', {str(first)!r}, '--duration', '0.5'])\n"
+        f"sys.exit(c.main(['run', {str(sc)!r}, '--out', {str(second)!r}, '--progress', 'lines']))\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
+    read_flush_lines(proc, 3)  # the first run prints none (no --progress lines)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert popup.read_log(first).run_end["status"] == "completed"
+    log = popup.read_log(second)
+    assert log.complete and log.run_end["status"] == "interrupted"

@@ -37,6 +37,9 @@ PYTHON_COMMANDS: Dict[str, Tuple[str, str]] = {
 
 _HELP = ("-h", "--help")
 
+#: Rust commands that install their own SIGINT/SIGTERM handling (they finish their logs).
+SIGNAL_AWARE = ("run", "sweep")
+
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``popup`` on ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
@@ -83,6 +86,15 @@ def run_rust(args: Sequence[str]) -> int:
     from . import _core
 
     _flush()
+    if args and args[0] in SIGNAL_AWARE:
+        # the run's own handlers finish the log on Ctrl-C, then Python's KeyboardInterrupt
+        # (chained) arrives: the exit code is the run's
+        code = 130
+        try:
+            code = int(_core.run_cli([PROG, *args]))
+        except KeyboardInterrupt:
+            pass
+        return code
     with _default_sigint():
         return int(_core.run_cli([PROG, *args]))
 

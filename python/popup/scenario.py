@@ -16,7 +16,7 @@ from __future__ import annotations
 import copy
 import sys
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Union
 
 import tomli_w
 
@@ -139,7 +139,3 @@ class Scenario:
     def __repr__(self) -> str:
         return f"Scenario(source={self.source!r}, duration_s={self.duration_s}, phases={self.phase_names()})"
 
-
-def problems_text(problems: List[Tuple[str, int, str, str]]) -> str:
-    """``file:line: key: message`` lines."""
-    return "\n".join(f"{f}:{ln}: {k}: {m}" if k else f"{f}:{ln}: {m}" for f, ln, k, m in problems)

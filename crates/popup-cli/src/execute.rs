@@ -73,6 +73,18 @@ impl Sink for Metrics {
     }
 }
 
+/// A duration override [s]: finite and > 0.
+///
+/// # Errors
+/// [`Error::Input`] naming `what`.
+pub fn check_duration(what: &str, d: f64) -> Result<f64> {
+    if d.is_finite() && d > 0.0 {
+        Ok(d)
+    } else {
+        Err(Error::input(what, format!("{d} s must be finite and > 0")))
+    }
+}
+
 /// How a run went.
 #[derive(Debug, Clone)]
 pub struct Outcome {

@@ -216,22 +216,19 @@ fn read_scenario(path: &Path) -> Option<Scenario> {
 fn run_scenario(path: &Path, out: &Path, duration: Option<f64>, seed: Option<u64>, mode: Mode) -> popup_core::Result<i32> {
     let Some(mut sc) = read_scenario(path) else { return Ok(2) };
     if let Some(d) = duration {
-        if !(d.is_finite() && d > 0.0) {
-            return Err(popup_core::Error::input("--duration", format!("{d} s must be finite and > 0")));
-        }
-        sc.closed.duration = d;
+        sc.closed.duration = execute::check_duration("--duration", d)?;
     }
     if let Some(s) = seed {
         sc.seed = s;
     }
-    let (stop, ids) = StopFlags::register();
+    let (stop, armed) = StopFlags::register();
     let mut prog = Progress::new(mode, sc.closed.duration, sc.log.flush_every_s, stop.clone());
     let mut extra = std::collections::BTreeMap::new();
     extra.insert("command".to_string(), format!("popup run {} --out {}", path.display(), out.display()));
     extra.insert("dt".to_string(), sc.options.dt.to_string());
     extra.insert("sample_rate_hz".to_string(), (1.0 / sc.closed.sample_period).to_string());
     let res = execute::execute(&sc, Some(out), &mut prog, extra, None);
-    StopFlags::unregister(ids);
+    drop(armed);
     let o = res?;
     for w in &o.warnings {
         eprintln!("popup: warning: {w}");
@@ -282,9 +279,12 @@ fn go(cli: Cli) -> popup_core::Result<i32> {
         }
         Cmd::Sweep { scenario, params, out, mcap, threads, duration, seed, parquet: false } => {
             let axes = params.iter().map(|p| sweep::parse_axis(p)).collect::<popup_core::Result<Vec<_>>>()?;
-            let (stop, ids) = StopFlags::register();
+            if let Some(d) = duration {
+                execute::check_duration("--duration", d)?;
+            }
+            let (stop, armed) = StopFlags::register();
             let res = sweep::sweep(&scenario, &axes, &out, mcap, threads, duration, seed, &stop);
-            StopFlags::unregister(ids);
+            drop(armed);
             let failed = res?;
             let n: usize = axes.iter().map(|a| a.values.len()).product();
             eprintln!("popup: {n} runs, {failed} not completed -> {}", out.join("summary.csv").display());

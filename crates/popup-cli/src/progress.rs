@@ -32,24 +32,54 @@ pub struct StopFlags {
     pub term: Arc<AtomicBool>,
 }
 
-impl StopFlags {
-    /// Flags set by SIGINT and SIGTERM from now until [`StopFlags::unregister`].
-    pub fn register() -> (StopFlags, Vec<signal_hook::SigId>) {
-        let f = StopFlags::default();
-        let mut ids = Vec::new();
-        if let Ok(id) = signal_hook::flag::register(signal_hook::consts::SIGINT, f.int.clone()) {
-            ids.push(id);
-        }
-        if let Ok(id) = signal_hook::flag::register(signal_hook::consts::SIGTERM, f.term.clone()) {
-            ids.push(id);
-        }
-        (f, ids)
-    }
+/// The process-wide handlers: installed once, armed only while a run is going.
+struct Handlers {
+    int: Arc<AtomicBool>,
+    term: Arc<AtomicBool>,
+    disarmed: Arc<AtomicBool>,
+}
 
-    /// Remove the handlers registered by [`StopFlags::register`].
-    pub fn unregister(ids: Vec<signal_hook::SigId>) {
-        for id in ids {
-            signal_hook::low_level::unregister(id);
+static HANDLERS: std::sync::OnceLock<Option<Handlers>> = std::sync::OnceLock::new();
+
+fn handlers() -> Option<&'static Handlers> {
+    HANDLERS
+        .get_or_init(|| {
+            use signal_hook::consts::{SIGINT, SIGTERM};
+            let h = Handlers { int: Arc::default(), term: Arc::default(), disarmed: Arc::new(AtomicBool::new(true)) };
+            // disarmed, SIGTERM keeps its default action (terminate); SIGINT falls through to
+            // the handler installed before ours (Python's KeyboardInterrupt in the Python front)
+            signal_hook::flag::register(SIGINT, h.int.clone()).ok()?;
+            signal_hook::flag::register(SIGTERM, h.term.clone()).ok()?;
+            signal_hook::flag::register_conditional_default(SIGTERM, h.disarmed.clone()).ok()?;
+            Some(h)
+        })
+        .as_ref()
+}
+
+/// Disarms the signal handlers when dropped.
+pub struct Armed(());
+
+impl Drop for Armed {
+    fn drop(&mut self) {
+        if let Some(h) = handlers() {
+            h.disarmed.store(true, Ordering::SeqCst);
+        }
+    }
+}
+
+impl StopFlags {
+    /// Flags raised by SIGINT and SIGTERM while the returned guard lives (the handlers are
+    /// installed once per process and re-armed for each run, so any number of runs in one
+    /// process, e.g. the Python front, each finish their file on Ctrl-C).
+    pub fn register() -> (StopFlags, Armed) {
+        match handlers() {
+            Some(h) => {
+                h.int.store(false, Ordering::SeqCst);
+                h.term.store(false, Ordering::SeqCst);
+                h.disarmed.store(false, Ordering::SeqCst);
+                (StopFlags { int: h.int.clone(), term: h.term.clone() }, Armed(()))
+            }
+            None => (StopFlags::default(), Armed(())),
         }
     }
 
@@ -104,17 +134,23 @@ impl Progress {
             b.set_position((t * 1000.0).round() as u64);
             b.set_message(format!("t = {t:.2}/{:.2} s, {speed:.1}x real time", self.duration));
         }
+        if self.stop.raised() {
+            Flow::Stop
+        } else {
+            Flow::Go
+        }
+    }
+
+    /// After the sample at `t` was handed to the log (which flushes at the same times).
+    fn on_sample(&mut self, t: f64) {
+        let wall = self.start.elapsed().as_secs_f64();
+        let speed = if wall > 0.0 { t / wall } else { 0.0 };
         if self.lines && t >= self.next_line - 1e-9 * self.every {
             let eta = if speed > 0.0 { (self.duration - t) / speed } else { f64::NAN };
             eprintln!("popup: t = {t:.6} s of {} s simulated ({speed:.1}x real time, ETA {eta:.0} s); log flushed", self.duration);
             while self.next_line <= t + 1e-9 * self.every {
                 self.next_line += self.every;
             }
-        }
-        if self.stop.raised() {
-            Flow::Stop
-        } else {
-            Flow::Go
         }
     }
 
@@ -136,7 +172,9 @@ pub struct Watch<'a> {
 
 impl Sink for Watch<'_> {
     fn sample(&mut self, row: &[f64; NCH], ctrl: Option<&[f64; NCTRL]>) -> Result<Flow> {
-        self.inner.sample(row, ctrl)
+        let f = self.inner.sample(row, ctrl)?;
+        self.progress.on_sample(row[0]);
+        Ok(f)
     }
     fn event(&mut self, e: &Event) -> Result<Flow> {
         self.inner.event(e)

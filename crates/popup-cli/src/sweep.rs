@@ -75,6 +75,9 @@ pub fn sweep(path: &Path, axes: &[Axis], out: &Path, mcap: bool, threads: usize,
     }
     std::fs::create_dir_all(out).map_err(|e| Error::input("--out", format!("{}: {e}", out.display())))?;
     let job = |i: usize| -> Result<Outcome> {
+        if stop.raised() {
+            return Err(Error::input("sweep", "skipped: the sweep was interrupted before this run started"));
+        }
         let log: Option<PathBuf> = mcap.then(|| out.join(format!("run_{i:04}.mcap")));
         let mut extra = BTreeMap::new();
         for (a, v) in axes.iter().zip(&pts[i]) {

@@ -573,7 +573,8 @@ impl Scenario {
     /// scenario's `[controller]` table as written (an empty table for the defaults).
     pub fn experiment_toml(&self) -> String {
         let s = |x: &str| toml::Value::String(x.to_string()).to_string();
-        let arm = self.arm_file.as_ref().map_or_else(|| self.arm_name.clone(), |p| p.display().to_string());
+        // an absolute path: a log is read from another folder than the scenario's
+        let arm = self.arm_file.as_ref().map_or_else(|| self.arm_name.clone(), |p| std::fs::canonicalize(p).unwrap_or_else(|_| p.clone()).display().to_string());
         let p = self.params.pressure_pa;
         let mut out = format!(
             "format = \"popup-run/1\"\narm = {}\npayload_kg = {}\npressure_pa = [{}, {}]\ngravity = {}\nreplay = \"reference\"\ndescription = {}\n\n",

@@ -3,7 +3,7 @@
 use crate::errors::{make, IntoPy};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2};
-use popup_cli::execute::execute;
+use popup_cli::execute::{check_duration, execute};
 use popup_cli::progress::{Progress, StopFlags};
 use popup_core::control::closed_loop::NCTRL;
 use popup_core::scenario::{set_key, Scenario};
@@ -69,23 +69,23 @@ pub fn run_scenario<'py>(
         make(py, "ScenarioError", &msg.join("\n"))
     })?;
     if let Some(d) = duration {
-        if !(d.is_finite() && d > 0.0) {
-            return Err(make(py, "InputError", &format!("input duration: {d} s must be finite and > 0")));
-        }
-        sc.closed.duration = d;
+        sc.closed.duration = check_duration("duration", d).py()?;
     }
     if let Some(s) = seed {
         sc.seed = s;
     }
-    let (o, col) = py
-        .detach(move || {
-            let mut col = Collect::default();
-            let mut extra = BTreeMap::new();
-            extra.insert("command".to_string(), "popup.Scenario.run (Python)".to_string());
-            let o = execute(&sc, out.as_deref().map(Path::new), &mut Progress::silent(StopFlags::default()), extra, Some(&mut col));
-            o.map(|o| (o, col))
-        })
-        .py()?;
+    // Ctrl-C stops the run and finishes the log; then Python's KeyboardInterrupt is raised
+    let (stop, armed) = StopFlags::register();
+    let res = py.detach(move || {
+        let mut col = Collect::default();
+        let mut extra = BTreeMap::new();
+        extra.insert("command".to_string(), "popup.Scenario.run (Python)".to_string());
+        let o = execute(&sc, out.as_deref().map(Path::new), &mut Progress::silent(stop), extra, Some(&mut col));
+        o.map(|o| (o, col))
+    });
+    drop(armed);
+    py.check_signals()?;
+    let (o, col) = res.py()?;
     let ns = col.data.len() / NCH;
     let data = Array2::from_shape_vec((ns, NCH), col.data).expect("rows of NCH");
     let ctrl = Array2::from_shape_vec((col.ctrl.len() / NCTRL, NCTRL), col.ctrl).expect("rows of NCTRL");

@@ -567,9 +567,7 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
         alarm_events(before, open, &alarms, st.t, sink)?;
         k += 1;
     }
-    if line.finish(sink)? == Flow::Stop && status == Status::Completed && nsample < nsample_full {
-        status = Status::Interrupted;
-    }
+    line.finish(sink)?;
     Ok(RunEnd { nsample, nsample_full, alarms, final_state: st, warnings: pd.warnings.clone(), events, status })
 }
 

@@ -56,8 +56,9 @@ impl Chan {
 }
 
 /// Streams a run into an MCAP file (`docs/logging.md`). Create it, run with it as the
-/// sink, then [`McapLogger::finish`] it; dropping it unfinished leaves a file without
-/// summary (readable up to the last flushed chunk).
+/// sink, then [`McapLogger::finish`] it (status and summary). Dropped unfinished, the mcap
+/// writer still writes its summary but there is no `run_end` record; a killed process
+/// leaves no summary (readable up to the last flushed chunk).
 pub struct McapLogger<'m, W: Write + Seek> {
     w: mcap::Writer<W>,
     path: String,
@@ -257,7 +258,8 @@ impl<W: Write + Seek> Sink for McapLogger<'_, W> {
                 continue;
             }
             self.buf.clear();
-            self.buf.extend_from_slice(format!("{{\"timestamp\":{{\"sec\":{},\"nsec\":{}}}", ns / 1_000_000_000, ns % 1_000_000_000).as_bytes());
+            self.buf.extend_from_slice(b"{\"timestamp\":");
+            serde_json::to_writer(&mut self.buf, &foxglove::time(ns)).map_err(|e| Error::Log { path: self.path.clone(), message: e.to_string() })?;
             put(&mut self.buf, "t", t);
             for (v, n) in vals.iter().zip(names) {
                 if v.is_finite() {
@@ -271,6 +273,13 @@ impl<W: Write + Seek> Sink for McapLogger<'_, W> {
         }
         self.samples += 1;
         self.t_last = t;
+        // every sample up to and including the one at the flush time is on disk after this
+        if t >= self.next_flush - 1e-9 * self.flush_every {
+            self.flush()?;
+            while self.next_flush <= t + 1e-9 * self.flush_every {
+                self.next_flush += self.flush_every;
+            }
+        }
         Ok(Flow::Go)
     }
 
@@ -294,12 +303,6 @@ impl<W: Write + Seek> Sink for McapLogger<'_, W> {
     fn state(&mut self, s: &StateView<'_>) -> Result<Flow> {
         let k = self.nstate;
         self.nstate += 1;
-        if s.t >= self.next_flush - 1e-9 * self.flush_every {
-            self.flush()?;
-            while self.next_flush <= s.t + 1e-9 * self.flush_every {
-                self.next_flush += self.flush_every;
-            }
-        }
         if k % self.viz_every != 0 {
             return Ok(Flow::Go);
         }
