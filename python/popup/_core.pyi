@@ -150,5 +150,5 @@ class Model:
         check_step: bool = True,
         effects: Optional[_F] = None,
         log: Optional[str] = None,
-        log_experiment: str = "",
+        log_experiment: Optional[str] = None,
     ) -> Tuple[_F, List[Optional[Tuple[str, str]]], List[List[Tuple[int, float, float, float]]], List[List[str]]]: ...

@@ -231,7 +231,7 @@ impl PyModel {
     /// `effect_registry()`); None = the arm's `[effects]`.
     /// log: MCAP path to stream the run into (B must be 1), with `log_experiment` the
     /// measured-run experiment TOML of its `experiment` metadata record.
-    #[pyo3(signature = (payload_kg, pressure_pa, drive, times, values, initial_q = None, initial_v = None, duration = None, sample_period = 1e-3, threads = 0, check_step = true, effects = None, log = None, log_experiment = String::new()))]
+    #[pyo3(signature = (payload_kg, pressure_pa, drive, times, values, initial_q = None, initial_v = None, duration = None, sample_period = 1e-3, threads = 0, check_step = true, effects = None, log = None, log_experiment = None))]
     #[allow(clippy::too_many_arguments)]
     fn rollout<'py>(
         &self,
@@ -249,7 +249,7 @@ impl PyModel {
         check_step: bool,
         effects: Option<PyReadonlyArray2<'py, f64>>,
         log: Option<String>,
-        log_experiment: String,
+        log_experiment: Option<String>,
     ) -> PyResult<RolloutOut<'py>> {
         let bad = |m: String| make(py, "InputError", &m);
         let payload = payload_kg.as_array().to_owned();
@@ -316,7 +316,7 @@ impl PyModel {
         let model = self.m.clone();
         let results = match log {
             None => py.detach(move || rollout(&model, &jobs, threads)),
-            Some(path) if nb == 1 => vec![py.detach(move || logged(&model, &jobs[0], &path, log_experiment))],
+            Some(path) if nb == 1 => vec![py.detach(move || logged(&model, &jobs[0], &path, log_experiment.unwrap_or_default()))],
             Some(_) => return Err(bad(format!("input log: one MCAP file logs one run; got a batch of {nb}"))),
         };
         let ns = crate::errors::batch_nsample(&results, |t| t.nsample)?;
