@@ -113,11 +113,7 @@ pub fn execute(sc: &Scenario, out: Option<&Path>, progress: &mut Progress, extra
     let mut metrics = Metrics::default();
     let meta = RunMeta { experiment_toml: sc.experiment_toml(), scenario: sc.text.clone(), seed: sc.seed, extra };
     let mut logger = match out {
-        Some(p) => {
-            let f = std::fs::File::create(p).map_err(|e| Error::Log { path: p.display().to_string(), message: format!("cannot create: {e}") })?;
-            let w = std::io::BufWriter::with_capacity(1 << 16, f);
-            Some(McapLogger::new(w, &p.display().to_string(), &model, &sc.log, &meta, sc.closed.sample_period, sc.closed.payload_radius)?)
-        }
+        Some(p) => Some(McapLogger::create(p, &model, &sc.log, &meta, sc.closed.sample_period, sc.closed.payload_radius)?),
         None => None,
     };
     let res = {

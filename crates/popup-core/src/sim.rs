@@ -4,7 +4,7 @@
 use crate::drive::{Drive, Spline3};
 use crate::effects::play;
 use crate::control::machine::Event;
-use crate::stream::{either, Collect, Delay, DelayLine, Flow, Sink, StateView};
+use crate::stream::{either, Collect, DelayLine, Flow, Sink, StateView};
 use crate::error::{Error, Result};
 use crate::forward::prescribe;
 use crate::integrate::{step_with, Workspace};
@@ -294,16 +294,7 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
         check_step(model, pd, &st.q, cfg.drive.is_replay())?;
     }
     let sd = &fx.sensor_delay;
-    let enc = if cfg.drive.is_replay() { 0.0 } else { sd.encoder };
-    let mut line = DelayLine::new(
-        every as f64 * dt,
-        &[
-            Delay { cols: 13..19, delay: sd.imu },
-            Delay { cols: 7..10, delay: sd.torque },
-            Delay { cols: 10..13, delay: sd.mocap },
-            Delay { cols: 1..7, delay: enc },
-        ],
-    );
+    let mut line = DelayLine::for_sensors(every as f64 * dt, sd, !cfg.drive.is_replay());
     let mut alarms: Vec<Alarm> = Vec::new();
     let mut open: [Option<usize>; 2] = [None, None];
     let mut row = [0.0; NCH];

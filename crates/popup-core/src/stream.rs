@@ -159,6 +159,20 @@ impl DelayLine {
         DelayLine { groups, cap, rows: vec![[0.0; NCH]; cap], ctrl: vec![[0.0; NCTRL]; cap], has_ctrl: false, n_in: 0, n_out: 0 }
     }
 
+    /// The line of the `sensor_delay` effect: IMU, torque and motion-capture columns, and
+    /// the encoder columns when `encoder` (not in replay, where the encoder is the input).
+    pub fn for_sensors(ts: f64, sd: &crate::effects::SensorDelay, encoder: bool) -> DelayLine {
+        DelayLine::new(
+            ts,
+            &[
+                Delay { cols: 13..19, delay: sd.imu },
+                Delay { cols: 7..10, delay: sd.torque },
+                Delay { cols: 10..13, delay: sd.mocap },
+                Delay { cols: 1..7, delay: if encoder { sd.encoder } else { 0.0 } },
+            ],
+        )
+    }
+
     /// Whether the line delays nothing (rows pass straight through).
     pub fn is_identity(&self) -> bool {
         self.groups.is_empty()

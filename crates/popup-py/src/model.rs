@@ -364,9 +364,8 @@ fn logged(model: &Model, job: &Job, path: &str, experiment: String) -> popup_cor
     use popup_core::log::{LogOptions, McapLogger, RunMeta};
     use popup_core::stream::{Collect, Tee};
     let pd = ParamData::new(model, &job.params)?;
-    let f = std::fs::File::create(path).map_err(|e| popup_core::Error::Log { path: path.to_string(), message: format!("cannot create: {e}") })?;
     let meta = RunMeta { experiment_toml: experiment, ..RunMeta::default() };
-    let mut lg = McapLogger::new(std::io::BufWriter::new(f), path, model, &LogOptions::default(), &meta, job.run.sample_period, 0.05)?;
+    let mut lg = McapLogger::create(std::path::Path::new(path), model, &LogOptions::default(), &meta, job.run.sample_period, 0.05)?;
     let mut col = Collect::default();
     let res = popup_core::sim::run_into(model, &pd, &job.run, &mut Tee { a: &mut col, b: &mut lg });
     match res {

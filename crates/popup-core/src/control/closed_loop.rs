@@ -19,7 +19,7 @@ use crate::model::Model;
 use crate::params::{ParamData, Params};
 use crate::sensor::{bending_moments, sample, NCH};
 use crate::sim::{alarm_events, check_step, diverged, rest_state, track_alarms, Alarm, State, Trajectory};
-use crate::stream::{either, Collect, Delay, DelayLine, Flow, Sink, StateView};
+use crate::stream::{either, Collect, DelayLine, Flow, Sink, StateView};
 use crate::statics::gravity_torque;
 
 /// Number of controller channels.
@@ -234,15 +234,7 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
     let nstep = (cfg.duration / dt + 1e-9).floor() as usize;
     let nsample_full = nstep / every + 1;
     let sd = &params.effects.sensor_delay;
-    let mut line = DelayLine::new(
-        every as f64 * dt,
-        &[
-            Delay { cols: 13..19, delay: sd.imu },
-            Delay { cols: 7..10, delay: sd.torque },
-            Delay { cols: 10..13, delay: sd.mocap },
-            Delay { cols: 1..7, delay: sd.encoder },
-        ],
-    );
+    let mut line = DelayLine::for_sensors(every as f64 * dt, sd, true);
     let mut nsample = 0usize;
     let mut emitted = 0usize;
     let mut row = [0.0; NCH];

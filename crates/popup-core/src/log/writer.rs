@@ -81,6 +81,18 @@ pub struct McapLogger<'m, W: Write + Seek> {
     t_last: f64,
 }
 
+impl<'m> McapLogger<'m, std::io::BufWriter<std::fs::File>> {
+    /// Create (or truncate) the file `path` and start a log on it (see [`McapLogger::new`]).
+    ///
+    /// # Errors
+    /// [`Error::Log`] when the file cannot be created, and as [`McapLogger::new`].
+    pub fn create(path: &std::path::Path, model: &'m Model, opts: &LogOptions, meta: &RunMeta, sample_period: f64, payload_radius: f64) -> Result<Self> {
+        let name = path.display().to_string();
+        let f = std::fs::File::create(path).map_err(|e| Error::Log { path: name.clone(), message: format!("cannot create: {e}") })?;
+        McapLogger::new(std::io::BufWriter::with_capacity(1 << 16, f), &name, model, opts, meta, sample_period, payload_radius)
+    }
+}
+
 fn ns_of(t: f64) -> u64 {
     (t * 1e9).round().max(0.0) as u64
 }
