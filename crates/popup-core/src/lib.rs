@@ -27,6 +27,7 @@ pub mod sim;
 pub mod control;
 pub mod spec;
 pub mod statics;
+pub mod beam;
 pub mod stream;
 #[cfg(feature = "mcap")]
 pub mod log;
