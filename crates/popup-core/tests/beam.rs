@@ -8,7 +8,7 @@ use std::f64::consts::PI;
 
 /// The thesis's first fitted link: E = 0.557 GPa, t = 1.2 mm (popup-lab's radius).
 fn tube() -> Section {
-    Section { e: 0.557e9, nu: 0.3, rho: 1100.0, r: 0.05, t: 1.2e-3 }
+    Section::tube(0.557e9, 0.3, 1100.0, 0.05, 1.2e-3)
 }
 
 const L: f64 = 0.5;
@@ -121,4 +121,32 @@ fn rayleigh_from_two_ratios() {
     let e = Rayleigh::from_ratios(10.0, 0.5, 100.0, 0.001).unwrap_err().to_string();
     assert!(e.contains("negative coefficient"), "{e}");
     assert!(Rayleigh::from_ratios(10.0, 0.02, 10.0, 0.05).is_err());
+}
+
+/// Timoshenko with Fichter's pressure term: the tip deflection under an end load is
+/// P L³/(3EI) + P L/(κGA + p π r²), exact; pressure stiffens, shear softens.
+#[test]
+fn shear_and_pressure_tip_deflection() {
+    let mut s = tube();
+    s.shear = true;
+    let ei = s.e * s.i();
+    let p = 3.0;
+    for pres in [0.0, 30e3, 90e3] {
+        s.pressure_pa = pres;
+        let u = Cantilever::new(s, L, 3, 0.0).unwrap().static_tip([0.0, p, 0.0, 0.0, 0.0, 0.0]).unwrap();
+        let want = p * L.powi(3) / (3.0 * ei) + p * L / (0.5 * s.g() * s.area() + pres * PI * s.r * s.r);
+        assert!(rel(u[1], want) < 1e-10, "p = {pres}: {} vs {want}", u[1]);
+        assert!(rel(u[5], p * L * L / (2.0 * ei)) < 1e-10, "the end rotation has no shear part");
+    }
+    let eb = Cantilever::new(tube(), L, 3, 0.0).unwrap().static_tip([0.0, p, 0.0, 0.0, 0.0, 0.0]).unwrap()[1];
+    let soft = Cantilever::new(Section { pressure_pa: 0.0, ..s }, L, 3, 0.0).unwrap().static_tip([0.0, p, 0.0, 0.0, 0.0, 0.0]).unwrap()[1];
+    let stiff = Cantilever::new(Section { pressure_pa: 90e3, ..s }, L, 3, 0.0).unwrap().static_tip([0.0, p, 0.0, 0.0, 0.0, 0.0]).unwrap()[1];
+    assert!(eb < stiff && stiff < soft);
+    // shear lowers the bending frequencies
+    let w_eb = Cantilever::new(tube(), L, 16, 0.0).unwrap().modes().unwrap().of(ModeKind::BendingY, 2);
+    let w_t = Cantilever::new(Section { pressure_pa: 0.0, ..s }, L, 16, 0.0).unwrap().modes().unwrap().of(ModeKind::BendingY, 2);
+    assert!(w_t[0] < w_eb[0] && w_t[1] < w_eb[1]);
+    let mut bad = s;
+    bad.pressure_pa = -1.0;
+    assert!(bad.validate().unwrap_err().to_string().contains("beam.pressure_pa"));
 }

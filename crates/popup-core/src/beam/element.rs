@@ -20,7 +20,15 @@ pub struct Section {
     pub r: f64,
     /// Wall thickness t [m] (thin wall: t ≪ r).
     pub t: f64,
+    /// Shear deformation (Timoshenko): `false` = Euler–Bernoulli.
+    pub shear: bool,
+    /// Inflation pressure p [Pa] (relative); with `shear`, it stiffens the shear term as
+    /// in Fichter's inflated-beam theory: κGA → κGA + p π r².
+    pub pressure_pa: f64,
 }
+
+/// Shear coefficient κ of a thin-walled circular tube.
+pub const KAPPA_TUBE: f64 = 0.5;
 
 impl Section {
     /// Check every value is finite and in range (E, ρ, r, t > 0; −1 < ν < 0.5; t < r).
@@ -40,7 +48,25 @@ impl Section {
         if self.t >= self.r {
             return Err(Error::param("beam.t", self.t, format!("a thin-walled tube needs t < r = {} m", self.r)));
         }
+        if !(self.pressure_pa.is_finite() && self.pressure_pa >= 0.0) {
+            return Err(Error::param("beam.pressure_pa", self.pressure_pa, "must be finite and >= 0 Pa"));
+        }
         Ok(())
+    }
+
+    /// A tube of `e`, `nu`, `rho`, `r`, `t` without shear or pressure terms
+    /// (Euler–Bernoulli).
+    pub fn tube(e: f64, nu: f64, rho: f64, r: f64, t: f64) -> Section {
+        Section { e, nu, rho, r, t, shear: false, pressure_pa: 0.0 }
+    }
+
+    /// Effective shear stiffness κGA + p π r² [N] (Fichter), +inf without shear.
+    pub fn shear_stiffness(&self) -> f64 {
+        if self.shear {
+            KAPPA_TUBE * self.g() * self.area() + self.pressure_pa * std::f64::consts::PI * self.r * self.r
+        } else {
+            f64::INFINITY
+        }
     }
 
     /// Wall area A = 2π r t [m²].
@@ -92,20 +118,24 @@ pub fn element_stiffness(s: &Section, l: f64) -> DMatrix<f64> {
         k[(a, a + 6)] -= c;
         k[(a + 6, a)] -= c;
     }
-    let c = s.e * s.i() / l.powi(3);
+    // shear parameter Φ = 12 EI / (κGA L²) (0: Euler–Bernoulli); Przemieniecki's element
+    let ei = s.e * s.i();
+    let phi = 12.0 * ei / (s.shear_stiffness() * l * l);
+    let c = ei / ((1.0 + phi) * l.powi(3));
     let l2 = l * l;
     let b = [
         [12.0 * c, 6.0 * l * c, -12.0 * c, 6.0 * l * c],
-        [6.0 * l * c, 4.0 * l2 * c, -6.0 * l * c, 2.0 * l2 * c],
+        [6.0 * l * c, (4.0 + phi) * l2 * c, -6.0 * l * c, (2.0 - phi) * l2 * c],
         [-12.0 * c, -6.0 * l * c, 12.0 * c, -6.0 * l * c],
-        [6.0 * l * c, 2.0 * l2 * c, -6.0 * l * c, 4.0 * l2 * c],
+        [6.0 * l * c, (2.0 - phi) * l2 * c, -6.0 * l * c, (4.0 + phi) * l2 * c],
     ];
     bending_block(&mut k, [1, 5, 7, 11], b, 1.0);
     bending_block(&mut k, [2, 4, 8, 10], b, -1.0);
     k
 }
 
-/// Consistent element mass (12×12, local axes) of length `l` [m].
+/// Consistent element mass (12×12, local axes) of length `l` [m]: the Euler–Bernoulli
+/// (cubic Hermite) mass also with `shear` (rotary inertia neglected, as in the stiffness).
 pub fn element_mass(s: &Section, l: f64) -> DMatrix<f64> {
     let mut m = DMatrix::zeros(12, 12);
     let ml = s.mass_per_length() * l;
@@ -134,7 +164,7 @@ mod tests {
     use super::*;
 
     fn tube() -> Section {
-        Section { e: 0.557e9, nu: 0.3, rho: 1000.0, r: 0.05, t: 1.2e-3 }
+        Section::tube(0.557e9, 0.3, 1000.0, 0.05, 1.2e-3)
     }
 
     /// Symmetric, rigid-body modes (translations, rotations about the axes) cost no energy,
