@@ -150,3 +150,17 @@ fn shear_and_pressure_tip_deflection() {
     bad.pressure_pa = -1.0;
     assert!(bad.validate().unwrap_err().to_string().contains("beam.pressure_pa"));
 }
+
+/// Ratios asked on bending modes 0 and 1 land on them even though a torsion or axial
+/// mode lies in between in the spectrum, and the user is told.
+#[test]
+fn rayleigh_on_named_modes_warns_about_the_spectrum_order() {
+    let s = tube();
+    let m = Cantilever::new(s, L, 12, 0.0).unwrap().modes().unwrap();
+    let (r, warn) = Rayleigh::for_modes(&m, ModeKind::BendingZ, (0, 0.02), (1, 0.05)).unwrap();
+    let w = m.of(ModeKind::BendingZ, 2);
+    assert!((r.ratio(w[0]) - 0.02).abs() < 1e-12 && (r.ratio(w[1]) - 0.05).abs() < 1e-12);
+    // bending in y and z are degenerate pairs: BendingZ mode 0 is not spectrum mode 0 or BendingZ mode 1 not 1
+    assert!(!warn.is_empty() && warn[0].contains("wrong mode"), "{warn:?}");
+    assert!(Rayleigh::for_modes(&m, ModeKind::Torsion, (0, 0.02), (40, 0.05)).is_err());
+}

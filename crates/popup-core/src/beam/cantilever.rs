@@ -191,6 +191,39 @@ impl Rayleigh {
         Ok(Rayleigh { mu, lambda })
     }
 
+    /// μ, λ from the computed `modes`: ratio `z1` on the `k1`-th and `z2` on the `k2`-th
+    /// mode of `kind` (0-based). Returns warnings when a request lands on another mode
+    /// than the same index of the whole spectrum would (another kind of mode lies below:
+    /// asking "mode 2" by index would have damped the wrong one), and for every mode the
+    /// result overdamps (ζ ≥ 1).
+    ///
+    /// # Errors
+    /// A missing mode, and as [`Rayleigh::from_ratios`].
+    pub fn for_modes(modes: &Modes, kind: ModeKind, (k1, z1): (usize, f64), (k2, z2): (usize, f64)) -> Result<(Rayleigh, Vec<String>)> {
+        let idx: Vec<usize> = (0..modes.omega.len()).filter(|&i| modes.kind[i] == kind).collect();
+        let pick = |k: usize| {
+            idx.get(k).copied().ok_or_else(|| Error::param("rayleigh.mode", k, format!("the beam has {} {kind:?} modes", idx.len())))
+        };
+        let (i1, i2) = (pick(k1)?, pick(k2)?);
+        let r = Rayleigh::from_ratios(modes.omega[i1], z1, modes.omega[i2], z2)?;
+        let mut warn = Vec::new();
+        for (k, i) in [(k1, i1), (k2, i2)] {
+            if i != k {
+                warn.push(format!(
+                    "{kind:?} mode {k} is mode {i} of the spectrum ({:.2} rad/s); mode {k} of the spectrum is {:?} at {:.2} rad/s: a ratio given by spectrum index would land on the wrong mode",
+                    modes.omega[i], modes.kind[k], modes.omega[k]
+                ));
+            }
+        }
+        for (i, w) in modes.omega.iter().enumerate() {
+            if r.ratio(*w) >= 1.0 {
+                warn.push(format!("mode {i} ({:?}, {w:.2} rad/s) is overdamped: zeta = {:.3}", modes.kind[i], r.ratio(*w)));
+                break;
+            }
+        }
+        Ok((r, warn))
+    }
+
     /// Modal damping ratio at ω [rad/s].
     pub fn ratio(&self, w: f64) -> f64 {
         self.mu / (2.0 * w) + self.lambda * w / 2.0
