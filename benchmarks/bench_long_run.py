@@ -42,6 +42,9 @@ import tomllib
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import cpu_model, load_str, ncores  # noqa: E402
+
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_SCENARIO = ROOT / "examples" / "scenarios" / "hold_1h.toml"
 PROGRESS_RE = re.compile(r"popup: t = ([0-9.eE+-]+) s of ([0-9.eE+-]+) s simulated \(([0-9.eE+-]+)x real time")
@@ -49,31 +52,6 @@ MIB = 1024.0 * 1024.0
 
 
 # ----------------------------------------------------------------------------- helpers
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def ncores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover
-        return os.cpu_count() or 1
-
-
-def load_str() -> str:
-    try:
-        return "load average (1, 5, 15 min) = " + ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    except OSError:  # pragma: no cover
-        return "load average unknown"
-
-
 def proc_status_kib(pid: int, keys: Tuple[str, ...] = ("VmRSS", "VmHWM")) -> Dict[str, int]:
     """The given ``/proc/<pid>/status`` fields in KiB ({} once the process is gone or a zombie)."""
     out: Dict[str, int] = {}

@@ -37,6 +37,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import popup  # noqa: E402
 import mjcf  # noqa: E402
+from machine import cpu_model, load_str, ncores  # noqa: E402
 
 try:
     import mujoco
@@ -52,31 +53,6 @@ INTEGRATORS = ("rk4", "semi_implicit")
 
 
 # ----------------------------------------------------------------------------- helpers
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def load_str() -> str:
-    try:
-        return "load average (1, 5, 15 min) = " + ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    except OSError:  # pragma: no cover
-        return "load average unknown"
-
-
-def ncores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover
-        return os.cpu_count() or 1
-
-
 def fmt_rate(x: float) -> str:
     return f"{x / 1e6:7.3f}e6"
 

@@ -3,10 +3,13 @@
 //! Deterministic simulation core for inflatable robot arms: the 7-DOF pseudo-rigid-body
 //! (PRBM) chain of the POP-UP arm (expandable at compile time to up to 17 joints: several
 //! segments per link, torsion joints), its rigid 3-DOF kinematics, sensors and batched
-//! rollouts. Pure Rust, no Python, no I/O.
+//! rollouts, the controllers, beam elements ([`beam`]) and scenario files ([`scenario`]).
+//! Pure Rust, no Python; the only I/O is the MCAP log writer ([`log`], feature `mcap`).
 //!
 //! Structure: [`spec::ArmSpec`] (editable, TOML) → [`model::Model`] (compiled, immutable)
-//! + [`params::Params`] (per rollout) → [`sim::run`] / [`rollout::rollout`].
+//! + [`params::Params`] (per rollout) → [`sim::run`] / [`rollout::rollout`]; streamed
+//! runs hand their samples to a [`stream::Sink`] ([`sim::run_into`],
+//! [`control::closed_loop::run_closed_loop_into`]).
 //! Units are SI; frames follow standard Denavit–Hartenberg (see `reference-arm.md`).
 #![warn(missing_docs)]
 

@@ -270,7 +270,8 @@ pub struct Noisy<'a> {
 }
 
 impl<'a> Noisy<'a> {
-    /// Noise with `seed` in front of `inner`.
+    /// Noise with `seed` in front of `inner`. Standard deviations that are not finite and
+    /// > 0 add nothing (a scenario refuses them before this point).
     pub fn new(inner: &'a mut dyn Sink, noise: &Noise, seed: u64) -> Noisy<'a> {
         Noisy {
             inner,
@@ -284,8 +285,7 @@ impl Sink for Noisy<'_> {
     fn sample(&mut self, row: &[f64; NCH], ctrl: Option<&[f64; NCTRL]>) -> Result<Flow> {
         let mut r = *row;
         for (cols, sd) in &self.groups {
-            if *sd > 0.0 {
-                let dist = Normal::new(0.0, *sd).expect("sd checked > 0 and finite by the scenario");
+            if let Some(dist) = Normal::new(0.0, *sd).ok().filter(|_| sd.is_finite() && *sd > 0.0) {
                 for c in cols.clone() {
                     r[c] += dist.sample(&mut self.rng);
                 }
