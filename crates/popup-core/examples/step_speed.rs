@@ -14,7 +14,7 @@ use std::time::Instant;
 
 fn main() {
     let duration = 20.0;
-    let largest = Structure { segments: [3, 3], torsion: [true, true] };
+    let largest = Structure { segments: [3, 3], torsion: [true, true], elements: [0, 0] };
     for (integ, structure) in [(Integrator::Rk4, Structure::default()), (Integrator::SemiImplicit, Structure::default()), (Integrator::Rk4, largest)] {
         // the 3-segment links have overdamped segment modes near −2900 1/s: RK4 needs dt < 0.92 ms
         let dts = if structure.is_nominal() { [1e-3, 5e-4] } else { [5e-4, 2.5e-4] };

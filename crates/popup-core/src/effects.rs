@@ -80,10 +80,43 @@ pub struct HigherBendingModes {
     pub segments: [f64; 2],
     /// Scale of the segment springs per link (1 = same static tip deflection as one joint).
     pub k_scale: [f64; 2],
+    /// Euler–Bernoulli beam elements per link (structural): 0 = PRBM link, n = 1..=6 a beam
+    /// link of n elements (`crate::beam::BeamLink`) whose material is the parameters below.
+    pub elements: [f64; 2],
+    /// Young's modulus of a beam link's wall E [Pa].
+    pub e_pa: [f64; 2],
+    /// Wall thickness of a beam link t [m] (I = π r³ t).
+    pub wall_m: [f64; 2],
+    /// Poisson's ratio of a beam link's wall ν [1] (with `shear`).
+    pub nu: [f64; 2],
+    /// Stiffness-proportional Rayleigh damping of a beam link λ [s].
+    pub lambda_s: [f64; 2],
+    /// Mass-proportional Rayleigh damping of a beam link μ [1/s].
+    pub mu_per_s: [f64; 2],
+    /// Timoshenko shear deformation with Fichter's pressure term, per beam link (0 or 1).
+    pub shear: [f64; 2],
 }
 impl Default for HigherBendingModes {
     fn default() -> Self {
-        HigherBendingModes { segments: [1.0; 2], k_scale: [1.0; 2] }
+        let m = crate::beam::PRESETS[0].1;
+        HigherBendingModes {
+            segments: [1.0; 2],
+            k_scale: [1.0; 2],
+            elements: [0.0; 2],
+            e_pa: [m.e; 2],
+            wall_m: [m.t; 2],
+            nu: [m.nu; 2],
+            lambda_s: [m.lambda; 2],
+            mu_per_s: [m.mu; 2],
+            shear: [0.0; 2],
+        }
+    }
+}
+
+impl HigherBendingModes {
+    /// The beam material of link `l`.
+    pub fn material(&self, l: usize) -> crate::beam::BeamMaterial {
+        crate::beam::BeamMaterial { e: self.e_pa[l], t: self.wall_m[l], nu: self.nu[l], lambda: self.lambda_s[l], mu: self.mu_per_s[l], shear: self.shear[l] != 0.0 }
     }
 }
 
@@ -261,6 +294,35 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
         doc: "PRBM segments per link (structural)",
     },
     p("higher_bending_modes", "k_scale", "1", 2, 1.0, 0.05, 20.0, true, "scale of the segment springs per link"),
+    ParamSpec {
+        effect: "higher_bending_modes",
+        name: "elements",
+        unit: "1",
+        len: 2,
+        neutral: 0.0,
+        lo: 0.0,
+        hi: crate::math::NELEM_MAX as f64,
+        fit: false,
+        integer: true,
+        doc: "Euler–Bernoulli beam elements per link, 0 = PRBM link (structural)",
+    },
+    p("higher_bending_modes", "e_pa", "Pa", 2, 0.557e9, 1e5, 1e12, false, "Young's modulus of a beam link's wall"),
+    p("higher_bending_modes", "wall_m", "m", 2, 1.2e-3, 1e-6, 0.05, false, "wall thickness of a beam link"),
+    p("higher_bending_modes", "nu", "1", 2, 0.3, 0.0, 0.499, false, "Poisson's ratio of a beam link's wall (with shear)"),
+    p("higher_bending_modes", "lambda_s", "s", 2, 3.896e-4, 0.0, 1.0, false, "stiffness-proportional Rayleigh damping of a beam link"),
+    p("higher_bending_modes", "mu_per_s", "1/s", 2, 0.0, 0.0, 1e3, false, "mass-proportional Rayleigh damping of a beam link"),
+    ParamSpec {
+        effect: "higher_bending_modes",
+        name: "shear",
+        unit: "1",
+        len: 2,
+        neutral: 0.0,
+        lo: 0.0,
+        hi: 1.0,
+        fit: false,
+        integer: true,
+        doc: "Timoshenko shear deformation of a beam link with Fichter's pressure term (0 or 1)",
+    },
     p("pressure_leak", "rate", "1/s", 2, 0.0, 0.0, 1.0, true, "leak rate 1/τ per link: p(t) = p0·exp(−rate·t)"),
     p("wrinkling", "ratio", "1", 1, 1.0, 0.01, 1.0, true, "bending stiffness after wrinkling / before"),
     p("wrinkling", "mw_scale", "1", 1, 1.0, 0.1, 10.0, true, "scale of the wrinkling moment M_w"),
@@ -277,7 +339,7 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
 ];
 
 /// Number of registered parameters.
-pub const NPARAM: usize = 20;
+pub const NPARAM: usize = 27;
 
 /// Length of the flat effect vector.
 pub const NE: usize = {
@@ -312,6 +374,13 @@ impl Effects {
             &e.backlash.gap,
             &e.higher_bending_modes.segments,
             &e.higher_bending_modes.k_scale,
+            &e.higher_bending_modes.elements,
+            &e.higher_bending_modes.e_pa,
+            &e.higher_bending_modes.wall_m,
+            &e.higher_bending_modes.nu,
+            &e.higher_bending_modes.lambda_s,
+            &e.higher_bending_modes.mu_per_s,
+            &e.higher_bending_modes.shear,
             &e.pressure_leak.rate,
             std::slice::from_ref(&e.wrinkling.ratio),
             std::slice::from_ref(&e.wrinkling.mw_scale),
@@ -338,6 +407,13 @@ impl Effects {
             &mut e.backlash.gap,
             &mut e.higher_bending_modes.segments,
             &mut e.higher_bending_modes.k_scale,
+            &mut e.higher_bending_modes.elements,
+            &mut e.higher_bending_modes.e_pa,
+            &mut e.higher_bending_modes.wall_m,
+            &mut e.higher_bending_modes.nu,
+            &mut e.higher_bending_modes.lambda_s,
+            &mut e.higher_bending_modes.mu_per_s,
+            &mut e.higher_bending_modes.shear,
             &mut e.pressure_leak.rate,
             std::slice::from_mut(&mut e.wrinkling.ratio),
             std::slice::from_mut(&mut e.wrinkling.mw_scale),
@@ -409,7 +485,10 @@ impl Effects {
         let slots = self.slots();
         PARAMS[..NPARAM].iter().zip(slots.iter()).filter(|(ps, _)| ps.effect == effect).all(|(ps, s)| {
             // parameters that only shape an effect whose strength is neutral do not count
-            let shaping = matches!((ps.effect, ps.name), ("joint_friction", "v_s") | ("torsion", "c_t") | ("higher_bending_modes", "k_scale"));
+            let shaping = matches!(
+                (ps.effect, ps.name),
+                ("joint_friction", "v_s") | ("torsion", "c_t") | ("higher_bending_modes", "k_scale" | "e_pa" | "wall_m" | "nu" | "lambda_s" | "mu_per_s" | "shear")
+            );
             shaping || s.iter().all(|&x| x.to_bits() == ps.neutral.to_bits())
         })
     }

@@ -34,6 +34,9 @@ pub fn passive(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> Vec
         t_out[b] = f;
     }
     if !leak && !wrinkle {
+        if model.has_beam() {
+            add_beam_forces(model, pd, q, v, &mut t_out);
+        }
         return t_out;
     }
     let s = spring_moments(model, pd, t, q);
@@ -44,7 +47,72 @@ pub fn passive(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> Vec
         }
         t_out[b] = f;
     }
+    if model.has_beam() {
+        add_beam_forces(model, pd, q, v, &mut t_out);
+    }
     t_out
+}
+
+/// Add the beam links' elastic and Rayleigh forces `−K_φ φ − C_φ φ̇` (respecting `disable`)
+/// [N·m]. Beam links are not touched by `pressure_leak` and `wrinkling` (docs/beams.md).
+#[inline]
+fn add_beam_forces(model: &Model, pd: &ParamData, q: &VecN, v: &VecN, out: &mut VecN) {
+    let d = &model.options.disable;
+    for bl in model.beam.iter().flatten() {
+        let r = bl.start..bl.start + bl.dof();
+        for i in r.clone() {
+            let mut f = 0.0;
+            for j in r.clone() {
+                if !d.spring {
+                    f -= pd.beam_k[(i, j)] * q[j];
+                }
+                if !d.damper {
+                    f -= pd.beam_c[(i, j)] * v[j];
+                }
+            }
+            out[i] += f;
+        }
+    }
+}
+
+/// Elastic forces of the beam links `K_φ φ` (generalised, chain coordinates; zero outside
+/// the beam blocks and with springs disabled) [N·m]. The entries of a link's first two
+/// joints are the bending moments at its clamped root.
+pub fn beam_spring(model: &Model, pd: &ParamData, q: &VecN) -> VecN {
+    let mut s = VecN::zeros();
+    if model.options.disable.spring {
+        return s;
+    }
+    for bl in model.beam.iter().flatten() {
+        let r = bl.start..bl.start + bl.dof();
+        for i in r.clone() {
+            for j in r.clone() {
+                s[i] += pd.beam_k[(i, j)] * q[j];
+            }
+        }
+    }
+    s
+}
+
+/// Full damping matrix of the passive joints: diag(c) plus the beam links' Rayleigh blocks
+/// (zero with dampers disabled) [N·m·s/rad].
+pub fn damping_matrix(model: &Model, pd: &ParamData) -> MatN {
+    let mut m = MatN::zeros();
+    let c = damping_diag(model, pd);
+    for i in 0..model.nv {
+        m[(i, i)] = c[i];
+    }
+    if !model.options.disable.damper {
+        for bl in model.beam.iter().flatten() {
+            let r = bl.start..bl.start + bl.dof();
+            for i in r.clone() {
+                for j in r.clone() {
+                    m[(i, j)] += pd.beam_c[(i, j)];
+                }
+            }
+        }
+    }
+    m
 }
 
 /// Spring moments of the bending joints at time `t` (with `pressure_leak` and `wrinkling`,
@@ -149,6 +217,16 @@ fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q:
         let c = damping_diag(model, pd);
         for i in 0..n {
             m[(i, i)] += h_implicit * c[i];
+        }
+        if model.has_beam() && !model.options.disable.damper {
+            for bl in model.beam.iter().flatten() {
+                let r = bl.start..bl.start + bl.dof();
+                for i in r.clone() {
+                    for j in r.clone() {
+                        m[(i, j)] += h_implicit * pd.beam_c[(i, j)];
+                    }
+                }
+            }
         }
     }
     match (drive, am) {

@@ -12,13 +12,17 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
-/// Capacity of the joint space: 3 motors + 2 links × (3 segments × 2 bending joints + 1
-/// torsion joint).
-pub const NMAX: usize = 17;
+/// Capacity of the joint space: 3 motors + 28 link joints, e.g. a `beam(4)` link (16
+/// joints) and a `beam(3)` link (12), or `beam(6)` (24) with a PRBM link and torsion joints.
+/// A model's own `nv` is checked against it at compile time.
+pub const NMAX: usize = 31;
 /// Number of motor joints.
 pub const NM: usize = 3;
-/// Most segments per link (`higher_bending_modes`).
-pub const NSEG_MAX: usize = 3;
+/// Most segments per link: 3 for a multi-segment PRBM link, 2 per element of a beam link
+/// (`higher_bending_modes.elements` ≤ [`NELEM_MAX`]).
+pub const NSEG_MAX: usize = 2 * NELEM_MAX;
+/// Most Euler–Bernoulli elements per beam link.
+pub const NELEM_MAX: usize = 6;
 /// Capacity of the bending-joint list: 2 links × [`NSEG_MAX`] universal joints × 2.
 pub const NBMAX: usize = 2 * NSEG_MAX * 2;
 /// Capacity of the passive-joint list (bending + torsion, the joints with a spring).
@@ -88,8 +92,9 @@ pub fn dot_n(a: &VecN, b: &VecN, n: usize) -> f64 {
 /// bit-identical to `SMatrix<f64, n, n>::cholesky().solve()` for n < 9.
 #[inline]
 pub fn cholesky_solve(a: &mut MatN, b: &mut VecN, n: usize) -> bool {
-    // one instance per chain length a model can have (7..=17), so that the loops have
-    // compile-time trip counts (unrolled, no bounds checks) like the old fixed 7×7 solve
+    // one instance per chain length a PRBM model can have (7..=17), so that the loops have
+    // compile-time trip counts (unrolled, no bounds checks) like the old fixed 7×7 solve;
+    // longer (beam) chains use the general kernel
     match n {
         7 => chol_fixed::<7>(a, b),
         8 => chol_fixed::<8>(a, b),

@@ -5,7 +5,8 @@
 //! [`crate::params::Params`].
 
 use crate::error::{Error, Result};
-use crate::math::{rot_x, rot_zx, skew, Mat3, Vec3, VecN, NBMAX, NM, NMAX, NPMAX, NSEG_MAX, NV_SPEC};
+use crate::beam::BeamLink;
+use crate::math::{rot_x, rot_zx, skew, Mat3, Vec3, VecN, NBMAX, NELEM_MAX, NM, NMAX, NPMAX, NSEG_MAX, NV_SPEC};
 use crate::spec::arm::{ArmSpec, JointKind, PartShape};
 
 /// Switches that turn force terms off (MuJoCo-style disable flags). Effects of the
@@ -74,11 +75,15 @@ pub struct Structure {
     /// A torsion joint per link (`torsion`): a revolute joint about the link's own long axis
     /// at the link root, just before its (first) universal joint. Default off.
     pub torsion: [bool; 2],
+    /// Euler–Bernoulli elements per link (`higher_bending_modes.elements`), 0 = PRBM (the
+    /// default). A beam link of n elements has 2n universal joints (see [`crate::beam`]'s
+    /// `BeamLink`); `segments` must then be 1.
+    pub elements: [usize; 2],
 }
 
 impl Default for Structure {
     fn default() -> Self {
-        Structure { segments: [1, 1], torsion: [false, false] }
+        Structure { segments: [1, 1], torsion: [false, false], elements: [0, 0] }
     }
 }
 
@@ -87,9 +92,26 @@ impl Structure {
     pub fn is_nominal(&self) -> bool {
         *self == Structure::default()
     }
-    /// Number of joints of the compiled chain: 3 motors + Σ_l (2 S_l + torsion_l).
+    /// Universal joints of link `l` in the chain: S_l for a PRBM link, 2 n_l for a beam link.
+    pub fn chain_segments(&self, l: usize) -> usize {
+        if self.elements[l] > 0 {
+            2 * self.elements[l]
+        } else {
+            self.segments[l]
+        }
+    }
+    /// Number of joints of the compiled chain: 3 motors + Σ_l (2 S_l + torsion_l) (S_l = 2 n_l
+    /// for a beam link).
     pub fn nv(&self) -> usize {
-        NM + (0..2).map(|l| 2 * self.segments[l] + usize::from(self.torsion[l])).sum::<usize>()
+        NM + (0..2).map(|l| 2 * self.chain_segments(l) + usize::from(self.torsion[l])).sum::<usize>()
+    }
+    /// The link model of link `l` as users write it: `"prbm"`, `"prbm(S)"` or `"beam(n)"`.
+    pub fn link_name(&self, l: usize) -> String {
+        match (self.elements[l], self.segments[l]) {
+            (0, 1) => "prbm".into(),
+            (0, s) => format!("prbm({s})"),
+            (n, _) => format!("beam({n})"),
+        }
     }
 }
 
@@ -263,12 +285,16 @@ pub struct Model {
     /// Per channel `d11, d12, d21, d22` (link l, axis a at index 2l + a): the bending joint
     /// of that axis in each segment, root first (the first `segments[l]` entries).
     pub segment_bend_idx: [[usize; NSEG_MAX]; 4],
-    /// Segments per link.
+    /// Universal joints per link in the chain: PRBM segments, or 2 per element of a beam link.
     pub segments: [usize; 2],
     /// Stiffness factor of each segment joint relative to the one-joint PRBM,
     /// `Σ_{i=0}^{S-1} (1 − i/S)²` (1 for S = 1): with it the static tip deflection under a
     /// tip force equals that of the one-joint link.
     pub seg_factor: [f64; 2],
+    /// The structure the chain was compiled with (segments, torsion joints, beam elements).
+    pub structure: Structure,
+    /// Beam links (`higher_bending_modes.elements > 0`), see [`crate::beam::BeamLink`].
+    pub beam: [Option<BeamLink>; 2],
     /// Model body (0-based) of each body of the arm file (0-based). A link's outer body maps
     /// to its last segment, whose frame is the original one.
     pub spec_body: [usize; NV_SPEC],
@@ -345,16 +371,23 @@ impl Part {
 }
 
 /// Split the parts of a link's outer body (frame O at the link tip, the universal joint at
-/// x = −len on O's x axis) into `s` segments of length len/s. Segment k (0-based) covers
-/// x ∈ [−len + k len/s, −len + (k+1) len/s] (the first open to −∞, the last to +∞); a tube
-/// part contributes to each segment the piece of it inside (mass and extra inertia in
-/// proportion to length, tube inertia of the piece's own length); points and zero-length
-/// tubes stay on the last segment. Segment k < s−1 has its frame at its outer end with the
-/// axes of the link-root frame P (`r_po` maps O axes to P axes); the last segment's frame is
-/// O itself.
-fn split_outer(parts: &[Part], s: usize, len: f64, r_po: &Mat3) -> [Rbi; NSEG_MAX] {
+/// x = −len on O's x axis) into segments ending at `ends[k]` from the joint (increasing, the
+/// last = len; equal pieces for a multi-segment PRBM link, chord bars and zero-length node
+/// segments for a beam link). Segment k (0-based) covers x ∈ [−len + ends[k−1], −len +
+/// ends[k]] (the first open to −∞, the last to +∞); a tube part contributes to each segment
+/// the piece of it inside (mass and extra inertia in proportion to length, tube inertia of
+/// the piece's own length); points and zero-length tubes stay on the last segment. Segment
+/// k < s−1 has its frame at its outer end with the axes of the link-root frame P (`r_po`
+/// maps O axes to P axes); the last segment's frame is O itself.
+///
+/// With `beam` (a beam link: segments alternate chord bars and zero-length node frames) a
+/// bar keeps the rod inertia of its chord (m h²/12 across, m r² about x) and the section's
+/// rotary inertia m r²/2 across goes half to each end node's frame (the first half to the
+/// link-root frame P, returned second), so that every node rotation carries inertia.
+fn split_outer(parts: &[Part], ends: &[f64], len: f64, r_po: &Mat3, beam: bool) -> ([Rbi; NSEG_MAX], Rbi) {
+    let s = ends.len();
     let mut out = [Rbi::ZERO; NSEG_MAX];
-    let seg = len / s as f64;
+    let mut root = Rbi::ZERO;
     for p in parts {
         let (l, r) = match p.tube {
             Some((l, r)) if l > 0.0 => (l, r),
@@ -364,9 +397,10 @@ fn split_outer(parts: &[Part], s: usize, len: f64, r_po: &Mat3) -> [Rbi; NSEG_MA
             }
         };
         let (x0, x1) = (p.c.x - l / 2.0, p.c.x + l / 2.0);
-        for (k, seg_body) in out.iter_mut().enumerate().take(s) {
-            let lo = if k == 0 { f64::NEG_INFINITY } else { -len + k as f64 * seg };
-            let hi = if k + 1 == s { f64::INFINITY } else { -len + (k + 1) as f64 * seg };
+        #[allow(clippy::needless_range_loop)]
+        for k in 0..s {
+            let lo = if k == 0 { f64::NEG_INFINITY } else { -len + ends[k - 1] };
+            let hi = if k + 1 == s { f64::INFINITY } else { -len + ends[k] };
             let (a, b) = (x0.max(lo), x1.min(hi));
             if b <= a {
                 continue;
@@ -374,18 +408,34 @@ fn split_outer(parts: &[Part], s: usize, len: f64, r_po: &Mat3) -> [Rbi; NSEG_MA
             let lk = b - a;
             let mk = p.m * lk / l;
             let ck = Vec3::new(0.5 * (a + b), p.c.y, p.c.z);
-            let ick = p.extra * (lk / l) + tube_inertia(mk, r, lk);
+            let mut ick = p.extra * (lk / l) + tube_inertia(mk, r, lk);
+            if beam {
+                // section rotary inertia to the end nodes (node frames: x along the link)
+                let half = mk * r * r / 4.0;
+                ick -= Mat3::from_diagonal(&Vec3::new(0.0, 2.0 * half, 2.0 * half));
+                let node = Rbi { m: 0.0, h: Vec3::zeros(), j: Mat3::from_diagonal(&Vec3::new(0.0, half, half)) };
+                if k == 0 {
+                    root = root.add(&Rbi { m: 0.0, h: Vec3::zeros(), j: r_po * node.j * r_po.transpose() });
+                } else {
+                    let prev = if k - 1 + 1 == s { node } else { Rbi { m: 0.0, h: Vec3::zeros(), j: r_po * node.j * r_po.transpose() } };
+                    out[k - 1] = out[k - 1].add(&prev);
+                }
+                if k + 1 < s {
+                    let next = if k + 2 == s { node } else { Rbi { m: 0.0, h: Vec3::zeros(), j: r_po * node.j * r_po.transpose() } };
+                    out[k + 1] = out[k + 1].add(&next);
+                }
+            }
             let piece = if k + 1 == s {
                 Rbi::from_com(mk, ck, ick)
             } else {
                 // O axes → P axes, origin moved from the link tip to the segment's outer end
-                let c_p = r_po * ck + Vec3::new(len - (k + 1) as f64 * seg, 0.0, 0.0);
+                let c_p = r_po * ck + Vec3::new(len - ends[k], 0.0, 0.0);
                 Rbi::from_com(mk, c_p, r_po * ick * r_po.transpose())
             };
-            *seg_body = seg_body.add(&piece);
+            out[k] = out[k].add(&piece);
         }
     }
-    out
+    (out, root)
 }
 
 impl Model {
@@ -404,6 +454,7 @@ impl Model {
         let from_effects = Structure {
             segments: spec.effects.higher_bending_modes.segments.map(|s| if s.is_finite() && s >= 1.0 && s.fract() == 0.0 { s as usize } else { 0 }),
             torsion: spec.effects.torsion.k_t.map(|k| k.is_finite()),
+            elements: spec.effects.higher_bending_modes.elements.map(|s| if s.is_finite() && s >= 0.0 && s.fract() == 0.0 { s as usize } else { usize::MAX }),
         };
         let structure = if options.structure == Structure::default() { from_effects } else { options.structure };
         if options.structure != Structure::default() && from_effects != Structure::default() && options.structure != from_effects {
@@ -415,9 +466,27 @@ impl Model {
         }
         for l in 0..2 {
             let s = structure.segments[l];
-            if !(1..=NSEG_MAX).contains(&s) {
+            if !(1..=3).contains(&s) {
                 return Err(Error::param(format!("options.structure.segments[{l}] (link {})", l + 1), s, "must be 1, 2 or 3"));
             }
+            let n = structure.elements[l];
+            if n > NELEM_MAX {
+                return Err(Error::param(format!("higher_bending_modes.elements[{l}] (link {})", l + 1), n as f64, format!("must be a whole number 0..={NELEM_MAX} (0 = PRBM)")));
+            }
+            if n > 0 && s != 1 {
+                return Err(Error::param(
+                    format!("higher_bending_modes.segments[{l}] (link {})", l + 1),
+                    s,
+                    format!("a beam link ({n} elements) has no PRBM segments: leave segments at 1"),
+                ));
+            }
+        }
+        if structure.nv() > NMAX {
+            return Err(Error::param(
+                "higher_bending_modes.elements",
+                format!("{:?}", structure.elements),
+                format!("the chain would have {} joints, more than the {NMAX} the engine holds (4 per element, 2 per PRBM segment, 1 per torsion joint, 3 motors)", structure.nv()),
+            ));
         }
         if spec.joints.len() != NV_SPEC {
             return Err(Error::param("joints", spec.joints.len(), "the PRBM chain must have exactly 7 joints"));
@@ -579,13 +648,13 @@ impl Model {
 
         // expansion: segments and torsion joints
         for (l, &(f, s)) in uj.iter().enumerate() {
-            if structure.segments[l] == 1 && !structure.torsion[l] {
+            if structure.chain_segments(l) == 1 && !structure.torsion[l] {
                 continue;
             }
             let why = format!(
-                "link {} has {} segment(s){}: its universal joint must be two consecutive rows (d = 0, a = 0) and (d = 0, a = L > 0) without θ offsets, the outer part along x",
+                "link {} has {} universal joint(s){}: its universal joint must be two consecutive rows (d = 0, a = 0) and (d = 0, a = L > 0) without θ offsets, the outer part along x",
                 l + 1,
-                structure.segments[l],
+                structure.chain_segments(l),
                 if structure.torsion[l] { " and a torsion joint" } else { "" }
             );
             let bad = |k: &str, i: usize, v: f64| Err(Error::param(format!("joints[{i}].{k}"), v, why.clone()));
@@ -620,7 +689,7 @@ impl Model {
         while i < NV_SPEC {
             let link_here = (0..2).find(|&l| uj[l].0 == i);
             match link_here {
-                Some(l) if structure.segments[l] > 1 || structure.torsion[l] => {
+                Some(l) if structure.chain_segments(l) > 1 || structure.torsion[l] => {
                     let (ja, jb) = (&base[i], &base[i + 1]);
                     if structure.torsion[l] {
                         joints.push(JointModel {
@@ -640,15 +709,31 @@ impl Model {
                             axis: 0,
                         });
                     }
-                    let ns = structure.segments[l];
+                    let ns = structure.chain_segments(l);
                     let len = jb.a;
-                    let pieces = if ns == 1 {
+                    // segment lengths: S equal pieces (PRBM) or, per element, a chord bar of
+                    // L/n and a zero-length node joint (beam)
+                    let nel = structure.elements[l];
+                    let seg_len = |k: usize| if nel == 0 { len / ns as f64 } else if k % 2 == 1 { len / nel as f64 } else { 0.0 };
+                    let (pieces, root_extra) = if ns == 1 {
                         let mut p = [Rbi::ZERO; NSEG_MAX];
                         p[0] = base_body[i + 1];
-                        p
+                        (p, Rbi::ZERO)
                     } else {
-                        split_outer(&parts[i + 1], ns, len, &(ja.rot(0.0) * jb.rot(0.0)))
+                        let ends: Vec<f64> = if nel == 0 {
+                            let seg = len / ns as f64;
+                            (0..ns).map(|k| (k + 1) as f64 * seg).collect()
+                        } else {
+                            let h = len / nel as f64;
+                            (0..ns).map(|k| (k / 2 + 1) as f64 * h).collect()
+                        };
+                        split_outer(&parts[i + 1], &ends, len, &(ja.rot(0.0) * jb.rot(0.0)), nel > 0)
                     };
+                    if nel > 0 {
+                        // the clamped root section turns with the body before the beam (frame P)
+                        let prev = joints.len() - 1;
+                        body[prev] = body[prev].add(&root_extra);
+                    }
                     for k in 1..=ns {
                         let suffix = if k == 1 { String::new() } else { format!("_{k}") };
                         let mut a = JointModel::dh(format!("{}{suffix}", ja.name), ja.kind, 0.0, 0.0, ja.alpha, 0.0, l);
@@ -661,7 +746,7 @@ impl Model {
                         joints.push(a);
                         // intermediate segments end in the link-root axes (α = −α_first), the
                         // last one in the original outer frame
-                        let (seg_a, seg_alpha) = if ns == 1 { (jb.a, jb.alpha) } else if k == ns { (len / ns as f64, jb.alpha) } else { (len / ns as f64, -ja.alpha) };
+                        let (seg_a, seg_alpha) = if ns == 1 { (jb.a, jb.alpha) } else if k == ns { (seg_len(k), jb.alpha) } else { (seg_len(k), -ja.alpha) };
                         let mut b = JointModel::dh(format!("{}{suffix}", jb.name), jb.kind, 0.0, seg_a, seg_alpha, 0.0, l);
                         b.segment = k;
                         b.axis = 1;
@@ -721,7 +806,7 @@ impl Model {
             }
         }
         let seg_factor = structure.segments.map(|s| (0..s).map(|i| (1.0 - i as f64 / s as f64).powi(2)).sum());
-        Ok(Model {
+        let mut model = Model {
             spec: spec.clone(),
             options,
             nv,
@@ -735,8 +820,10 @@ impl Model {
             npassive,
             root_bend_idx,
             segment_bend_idx,
-            segments: structure.segments,
+            segments: [structure.chain_segments(0), structure.chain_segments(1)],
             seg_factor,
+            structure,
+            beam: [None, None],
             spec_body,
             armature,
             payload_body: spec_body[payload_body],
@@ -747,7 +834,48 @@ impl Model {
             imu: [(spec_body[imu[0].0], imu[0].1), (spec_body[imu[1].0], imu[1].1)],
             ee: (spec_body[ee.0], ee.1),
             gravity,
-        })
+        };
+        for l in 0..2 {
+            if structure.elements[l] > 0 {
+                model.attach_beam(l)?;
+            }
+        }
+        Ok(model)
+    }
+
+    /// Compile link `l`'s chain joints into a [`BeamLink`]: the map T from the chain's
+    /// geometry at q = 0 (link frame B = the tip frame's axes).
+    fn attach_beam(&mut self, l: usize) -> Result<()> {
+        let n = self.structure.elements[l];
+        let start = self.channel_joints(2 * l)[0];
+        let nb = 4 * n;
+        let f = crate::kinematics::prbm::frames(self, &VecN::zeros());
+        let r_b = f.r_wb[start + nb];
+        let len = (f.p_wb[start + nb] - f.p_wb[start]).norm();
+        let mut t_map = nalgebra::DMatrix::zeros(nb, nb);
+        for e in 1..=n {
+            let x_e = f.p_wb[start + 4 * e];
+            for jj in 0..4 * e {
+                let j = start + jj;
+                let w = f.r_wb[j + 1] * self.joints[j].u;
+                let dp = r_b.transpose() * w.cross(&(x_e - f.p_wb[j]));
+                let dth = r_b.transpose() * w;
+                let row = 4 * (e - 1);
+                t_map[(row, jj)] = dp.y;
+                t_map[(row + 1, jj)] = dp.z;
+                t_map[(row + 2, jj)] = dth.y;
+                t_map[(row + 3, jj)] = dth.z;
+            }
+        }
+        let bar_mass: f64 = (0..n).map(|e| self.body[start + 4 * e + 1].m).sum();
+        self.beam[l] = Some(BeamLink::new(l, n, start, len, self.link_radius[l], bar_mass / len, t_map)?);
+        Ok(())
+    }
+
+    /// True when a link is an Euler–Bernoulli beam.
+    #[inline]
+    pub fn has_beam(&self) -> bool {
+        self.beam[0].is_some() || self.beam[1].is_some()
     }
 
     /// Name of chain joint `i` (0-based, `i < nv`).

@@ -4,7 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::effects::{drag_points, DragPoint, Effects, MAX_DRAG};
-use crate::math::{Mat3, Vec3, NMAX};
+use crate::math::{Mat3, MatN, Vec3, NMAX};
 use crate::model::{Model, Rbi};
 
 /// Parameters of one rollout.
@@ -50,6 +50,11 @@ pub struct ParamData {
     pub body: [Rbi; NMAX],
     /// Table values k(p₀), c(p₀) per link before the link scale (for `pressure_leak`).
     pub kc0: [[f64; 2]; 2],
+    /// Beam links: elastic stiffness `Tᵀ K T` in chain coordinates (zero outside the beam
+    /// blocks; their diagonal `k` entries are 0) [N·m/rad].
+    pub beam_k: MatN,
+    /// Beam links: Rayleigh damping `Tᵀ (μ M + λ K) T` in chain coordinates [N·m·s/rad].
+    pub beam_c: MatN,
     /// Air-drag quadrature points and their count (filled only with `air_drag` on).
     pub drag: ([DragPoint; MAX_DRAG], usize),
     /// Warnings raised while deriving (pressure outside the table, ...).
@@ -125,6 +130,9 @@ impl ParamData {
         let mut c = [0.0; NMAX];
         for &b in model.bend() {
             let l = model.joints[b].link;
+            if model.beam[l].is_some() {
+                continue;
+            }
             // k_scale shapes the segments of a multi-segment link only (neutral for one)
             let sc = if model.segments[l] > 1 { fx.higher_bending_modes.k_scale[l] } else { 1.0 };
             k[b] = kl[l] * model.seg_factor[l] * sc;
@@ -141,8 +149,32 @@ impl ParamData {
         let com = if fx.payload_mass.com_offset_m == [0.0; 3] { model.payload_com } else { model.payload_com + Vec3::from(fx.payload_mass.com_offset_m) };
         let payload = if fx.payload_mass.delta_kg == 0.0 { params.payload_kg } else { payload };
         body[pb] = body[pb].add(&Rbi::from_com(payload, com, Mat3::zeros()));
+        let mut beam_k = MatN::zeros();
+        let mut beam_c = MatN::zeros();
+        for bl in model.beam.iter().flatten() {
+            let l = bl.link;
+            // name the effect parameter behind a bad section value
+            let (kj, cj) = bl.joint_matrices(&fx.higher_bending_modes.material(l), params.pressure_pa[l]).map_err(|e| match e {
+                Error::InvalidParameter { what, value, requirement } => {
+                    let key = match what.as_str() {
+                        "beam.E" => format!("effects.higher_bending_modes.e_pa[{l}]"),
+                        "beam.t" => format!("effects.higher_bending_modes.wall_m[{l}]"),
+                        "beam.nu" => format!("effects.higher_bending_modes.nu[{l}]"),
+                        other => format!("{other} (beam link {})", l + 1),
+                    };
+                    Error::InvalidParameter { what: key, value, requirement }
+                }
+                other => other,
+            })?;
+            for i in 0..bl.dof() {
+                for j in 0..bl.dof() {
+                    beam_k[(bl.start + i, bl.start + j)] = kj[(i, j)];
+                    beam_c[(bl.start + i, bl.start + j)] = cj[(i, j)];
+                }
+            }
+        }
         let drag = if fx.air_drag.cd > 0.0 { drag_points(model) } else { ([DragPoint { body: 0, p_b: Vec3::zeros(), area: 0.0 }; MAX_DRAG], 0) };
-        Ok(ParamData { params: *params, k, c, mw, body, kc0, drag, warnings })
+        Ok(ParamData { params: *params, k, c, mw, body, kc0, beam_k, beam_c, drag, warnings })
     }
 
     /// Spring and damper coefficients of chain joint `b` at time `t` (with `pressure_leak`,

@@ -43,31 +43,49 @@ pub fn channel_index(name: &str) -> Option<usize> {
 }
 
 /// Bending moments `k δ + c δ̇` of the root universal joints `[d11, d12, d21, d22]` [N·m]
-/// and |M|/M_w per link.
+/// and |M|/M_w per link. For a beam link the moments at its clamped root: the first two
+/// rows of `K_φ φ + C_φ φ̇` (the generalised force of a joint that turns the whole beam
+/// about the root is the root moment about that axis).
 #[inline]
 pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> ([f64; 4], [f64; 2]) {
     let d = &model.options.disable;
     let fx = &pd.params.effects;
     let mut m = [0.0; 4];
     let mut sq = [0.0; 2];
-    if fx.pressure_leak.rate == [0.0; 2] && (fx.wrinkling.ratio == 1.0 || d.spring) {
+    let plain = fx.pressure_leak.rate == [0.0; 2] && (fx.wrinkling.ratio == 1.0 || d.spring);
+    if plain {
         for (a, &b) in model.root_bend_idx.iter().enumerate() {
             let ks = if d.spring { 0.0 } else { pd.k[b] };
             let cs = if d.damper { 0.0 } else { pd.c[b] };
             m[a] = ks * q[b] + cs * v[b];
-            sq[model.joints[b].link] += m[a] * m[a];
         }
-        let ratio = std::array::from_fn(|l| if pd.mw[l] > 0.0 { sq[l].sqrt() / pd.mw[l] } else { f64::INFINITY });
-        return (m, ratio);
+    } else {
+        let s = spring_moments(model, pd, t, q);
+        for (a, &b) in model.root_bend_idx.iter().enumerate() {
+            let cs = if d.damper { 0.0 } else { pd.kc_at(model, b, t).1 };
+            m[a] = s[b] + cs * v[b];
+        }
     }
-    let s = spring_moments(model, pd, t, q);
+    for bl in model.beam.iter().flatten() {
+        for ax in 0..2 {
+            let i = bl.start + ax;
+            let mut x = 0.0;
+            for j in bl.start..bl.start + bl.dof() {
+                if !d.spring {
+                    x += pd.beam_k[(i, j)] * q[j];
+                }
+                if !d.damper {
+                    x += pd.beam_c[(i, j)] * v[j];
+                }
+            }
+            m[2 * bl.link + ax] = x;
+        }
+    }
     for (a, &b) in model.root_bend_idx.iter().enumerate() {
-        let cs = if d.damper { 0.0 } else { pd.kc_at(model, b, t).1 };
-        m[a] = s[b] + cs * v[b];
         sq[model.joints[b].link] += m[a] * m[a];
     }
     let ratio = std::array::from_fn(|l| {
-        let mw = pd.mw_at(l, t);
+        let mw = if plain { pd.mw[l] } else { pd.mw_at(l, t) };
         if mw > 0.0 {
             sq[l].sqrt() / mw
         } else {
@@ -102,6 +120,10 @@ fn energy_with(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, m: &Ma
         pot -= model.gravity.dot(&mc_w);
     }
     let fx = &pd.params.effects;
+    if model.has_beam() {
+        let bs = crate::forward::beam_spring(model, pd, q);
+        pot += 0.5 * dot_n(q, &bs, n);
+    }
     if model.options.disable.spring {
     } else if fx.pressure_leak.rate == [0.0; 2] && fx.wrinkling.ratio == 1.0 {
         for &b in model.passive() {

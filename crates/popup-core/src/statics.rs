@@ -4,7 +4,7 @@
 
 use crate::dynamics::{crba, rnea};
 use crate::error::{Error, Result};
-use crate::forward::damping_diag;
+use crate::forward::{beam_spring, damping_matrix};
 use crate::math::{MatN, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
@@ -33,6 +33,13 @@ pub fn stiffness(model: &Model, pd: &ParamData, q: &VecN) -> MatN {
     if !model.options.disable.spring {
         for &b in model.passive() {
             k[(b, b)] += pd.k[b];
+        }
+        for bl in model.beam.iter().flatten() {
+            for i in bl.start..bl.start + bl.dof() {
+                for j in bl.start..bl.start + bl.dof() {
+                    k[(i, j)] += pd.beam_k[(i, j)];
+                }
+            }
         }
     }
     k
@@ -66,6 +73,7 @@ pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<Vec
         let mut r = DVector::<f64>::zeros(bi.len());
         let fx = &pd.params.effects;
         let sm = if fx.wrinkling.ratio != 1.0 || fx.pressure_leak.rate != [0.0; 2] { Some(crate::forward::spring_moments(model, pd, 0.0, &x)) } else { None };
+        let bs = if model.has_beam() { Some(beam_spring(model, pd, &x)) } else { None };
         for (a, &b) in bi.iter().enumerate() {
             let spring = if model.options.disable.spring {
                 0.0
@@ -75,6 +83,9 @@ pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<Vec
                 pd.k[b] * x[b]
             };
             r[a] = g[b] + spring;
+            if let Some(bs) = &bs {
+                r[a] += bs[b];
+            }
         }
         let mut kfull = stiffness(model, pd, &x);
         if sm.is_some() && !model.options.disable.spring {
@@ -141,10 +152,10 @@ pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with
     let n = free.len();
     let mm = mass_matrix(model, pd, q);
     let kk = stiffness(model, pd, q);
-    let cc = if with_damping { damping_diag(model, pd) } else { VecN::zeros() };
+    let cc = if with_damping { damping_matrix(model, pd) } else { MatN::zeros() };
     let m = DMatrix::from_fn(n, n, |i, j| mm[(free[i], free[j])]);
     let k = DMatrix::from_fn(n, n, |i, j| kk[(free[i], free[j])]);
-    let c = DMatrix::from_fn(n, n, |i, j| if i == j { cc[free[i]] } else { 0.0 });
+    let c = DMatrix::from_fn(n, n, |i, j| cc[(free[i], free[j])]);
     let mi = m.clone().try_inverse().expect("mass matrix invertible");
     let mut a = DMatrix::zeros(2 * n, 2 * n);
     for i in 0..n {

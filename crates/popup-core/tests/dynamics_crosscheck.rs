@@ -60,7 +60,7 @@ fn cases() -> Vec<Case> {
     // expanded chains: segments and torsion joints
     let mut rng = Rng(0x51ED_2701_A5A5_0F0F);
     for n in 0..NSTRUCT {
-        let structure = Structure { segments: [1 + n % 3, 1 + (n / 3) % 3], torsion: [n % 2 == 0, n % 4 < 2] };
+        let structure = Structure { segments: [1 + n % 3, 1 + (n / 3) % 3], torsion: [n % 2 == 0, n % 4 < 2], elements: [0, 0] };
         let g = [rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0), rng.uniform(-10.0, 10.0)];
         let model = Model::compile(&spec, Options { gravity: Some(g), structure, ..Options::default() }).unwrap();
         let mut effects = popup_core::effects::Effects::default();

@@ -377,7 +377,7 @@ fn structural_effects_in_the_arm_file_compile_the_extra_joints() {
     let e = ParamData::new(&m, &Params { payload_kg: 1.0, pressure_pa: [30e3; 2], effects: fx }).unwrap_err().to_string();
     assert!(e.contains("effects.torsion.k_t[0]") && e.contains("torsion joint"), "{e}");
     // and a contradictory Options.structure is refused
-    let opts = Options { structure: popup_core::model::Structure { segments: [3, 1], torsion: [false; 2] }, ..Options::default() };
+    let opts = Options { structure: popup_core::model::Structure { segments: [3, 1], torsion: [false; 2], elements: [0, 0] }, ..Options::default() };
     let e = Model::compile(&spec, opts).unwrap_err().to_string();
     assert!(e.contains("options.structure"), "{e}");
 }

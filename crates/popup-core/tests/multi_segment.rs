@@ -30,7 +30,7 @@ fn structures() -> Vec<Structure> {
     for s0 in 1..=3 {
         for s1 in 1..=3 {
             for t in [[false, false], [true, false], [false, true], [true, true]] {
-                let s = Structure { segments: [s0, s1], torsion: t };
+                let s = Structure { segments: [s0, s1], torsion: t, elements: [0, 0] };
                 if !s.is_nominal() {
                     v.push(s);
                 }
@@ -185,7 +185,7 @@ fn tip_load_spec(l: usize) -> ArmSpec {
 /// its motor) and relative to it, so that only link l's own compliance counts.
 fn tip_deflection(l: usize, segments: [usize; 2], g: [f64; 3], seg_k_scale: f64) -> Vec3 {
     let spec = tip_load_spec(l);
-    let m = Model::compile(&spec, Options { gravity: Some(g), structure: Structure { segments, torsion: [false; 2] }, ..Options::default() }).unwrap();
+    let m = Model::compile(&spec, Options { gravity: Some(g), structure: Structure { segments, torsion: [false; 2], elements: [0, 0] }, ..Options::default() }).unwrap();
     let mut p = Params::defaults(&m);
     p.payload_kg = 0.05;
     p.effects.higher_bending_modes.k_scale[l] = seg_k_scale;
@@ -226,7 +226,7 @@ fn segment_stiffness_gives_the_one_joint_tip_deflection() {
 fn segment_stiffness_formula() {
     let spec = ArmSpec::popup_lab();
     for (s, f) in [(1, 1.0), (2, 1.25), (3, 1.0 + 4.0 / 9.0 + 1.0 / 9.0)] {
-        let m = compile(&spec, Structure { segments: [s, s], torsion: [false; 2] });
+        let m = compile(&spec, Structure { segments: [s, s], torsion: [false; 2], elements: [0, 0] });
         assert!((m.seg_factor[0] - f).abs() < 1e-15 && (m.seg_factor[1] - f).abs() < 1e-15);
         let nominal = compile(&spec, Structure::default());
         let (pd, pd0) = (ParamData::new(&m, &params(&m, 1.0)).unwrap(), ParamData::new(&nominal, &params(&nominal, 1.0)).unwrap());
@@ -251,7 +251,7 @@ fn first_mode_kept_and_higher_modes_appear() {
         let modes0 = locked_modes(&nominal, &pd0, &rest_state(&nominal, &pd0, 0.0, qm).unwrap().q);
         assert_eq!(modes0.len(), 4);
         for s in [[2, 2], [3, 3], [2, 1], [1, 3]] {
-            let m = compile(&spec, Structure { segments: s, torsion: [false; 2] });
+            let m = compile(&spec, Structure { segments: s, torsion: [false; 2], elements: [0, 0] });
             let pd = ParamData::new(&m, &params(&m, payload)).unwrap();
             let modes = locked_modes(&m, &pd, &rest_state(&m, &pd, 0.0, qm).unwrap().q);
             println!("payload {payload} motors {qm:?} segments {s:?}: modes {modes:.1?} (one segment {modes0:.1?}) rad/s");
@@ -270,7 +270,7 @@ fn first_mode_kept_and_higher_modes_appear() {
 #[test]
 fn channels_sum_segments_root_moments_and_energy() {
     let spec = ArmSpec::popup_lab();
-    let m = compile(&spec, Structure { segments: [2, 3], torsion: [true, false] });
+    let m = compile(&spec, Structure { segments: [2, 3], torsion: [true, false], elements: [0, 0] });
     let pd = ParamData::new(&m, &params(&m, 1.5)).unwrap();
     // a fast out-of-plane replay so that every joint moves
     let tk: Vec<f64> = (0..=24).map(|k| k as f64 * 0.0125).collect();
@@ -308,7 +308,7 @@ fn channels_sum_segments_root_moments_and_energy() {
 fn bad_structure_is_refused_by_name() {
     let spec = ArmSpec::popup_lab();
     for (s, what) in [([0, 1], "options.structure.segments[0] (link 1)"), ([1, 4], "options.structure.segments[1] (link 2)")] {
-        match Model::compile(&spec, Options { structure: Structure { segments: s, torsion: [false; 2] }, ..Options::default() }) {
+        match Model::compile(&spec, Options { structure: Structure { segments: s, torsion: [false; 2], elements: [0, 0] }, ..Options::default() }) {
             Err(Error::InvalidParameter { what: w, .. }) => assert_eq!(w, what),
             other => panic!("{s:?}: {other:?}"),
         }
@@ -316,7 +316,7 @@ fn bad_structure_is_refused_by_name() {
     // a universal joint that is not (d = 0, a = 0) + (d = 0, a = L) cannot be split
     let mut odd = spec.clone();
     odd.joints[2].a = 0.01;
-    match Model::compile(&odd, Options { structure: Structure { segments: [2, 1], torsion: [false; 2] }, ..Options::default() }) {
+    match Model::compile(&odd, Options { structure: Structure { segments: [2, 1], torsion: [false; 2], elements: [0, 0] }, ..Options::default() }) {
         Err(Error::InvalidParameter { what, requirement, .. }) => {
             assert_eq!(what, "joints[2].a");
             assert!(requirement.contains("link 1"), "{requirement}");
@@ -328,7 +328,7 @@ fn bad_structure_is_refused_by_name() {
     let mut p = Params::defaults(&compile(&spec, Structure::default()));
     for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         p.effects.higher_bending_modes.k_scale = [1.0, bad];
-        match ParamData::new(&compile(&spec, Structure { segments: [2, 2], torsion: [false; 2] }), &p) {
+        match ParamData::new(&compile(&spec, Structure { segments: [2, 2], torsion: [false; 2], elements: [0, 0] }), &p) {
             Err(Error::InvalidParameter { what, .. }) => assert_eq!(what, "effects.higher_bending_modes.k_scale[1]"),
             other => panic!("seg_k_scale {bad}: {other:?}"),
         }
@@ -341,7 +341,7 @@ fn expanded_chain_conserves_energy_without_dampers() {
     // and swings; the energy channel (kinetic + gravity + every spring) must stay constant
     // up to the RK4 error, which falls ~h⁴ (checked at two steps)
     let spec = ArmSpec::popup_lab();
-    let structure = Structure { segments: [2, 3], torsion: [true, true] };
+    let structure = Structure { segments: [2, 3], torsion: [true, true], elements: [0, 0] };
     let drift = |dt: f64| {
         let m = Model::compile(&spec, Options { dt, structure, disable: popup_core::model::Disable { damper: true, ..Default::default() }, ..Options::default() }).unwrap();
         let pd = ParamData::new(&m, &params(&m, 1.0)).unwrap();
@@ -365,7 +365,7 @@ fn expanded_chain_conserves_energy_without_dampers() {
 
 #[test]
 fn initial_state_beyond_the_chain_is_refused() {
-    let m = compile(&ArmSpec::popup_lab(), Structure { segments: [2, 1], torsion: [false; 2] });
+    let m = compile(&ArmSpec::popup_lab(), Structure { segments: [2, 1], torsion: [false; 2], elements: [0, 0] });
     let pd = ParamData::new(&m, &params(&m, 1.0)).unwrap();
     let mut st = rest_state(&m, &pd, 0.0, [0.0; 3]).unwrap();
     st.q[m.nv] = 0.1;

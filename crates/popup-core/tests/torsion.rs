@@ -24,7 +24,7 @@ use popup_core::Error;
 use std::f64::consts::FRAC_PI_2;
 
 fn model(torsion: [bool; 2], dt: f64) -> Model {
-    Model::compile(&ArmSpec::popup_lab(), Options { dt, structure: Structure { segments: [1, 1], torsion }, ..Options::default() }).unwrap()
+    Model::compile(&ArmSpec::popup_lab(), Options { dt, structure: Structure { segments: [1, 1], torsion, elements: [0, 0] }, ..Options::default() }).unwrap()
 }
 
 fn params(m: &Model, k_t: f64, c_t: f64) -> Params {

@@ -159,6 +159,26 @@ pub fn element_mass(s: &Section, l: f64) -> DMatrix<f64> {
     m
 }
 
+/// Consistent rotary-inertia mass of the bending rotations (12×12, local axes) of length
+/// `l` [m] with rotary inertia per length `rho_i` [kg·m] (ρI of the section about a
+/// diameter; for a thin tube ρA r²/2): `ρI/(30 l) [36, 3l, −36, 3l; 3l, 4l², −3l, −l²; …]`
+/// per plane (Rayleigh beam). Added to [`element_mass`] it makes the element's kinetic
+/// energy exact for rigid rotations of a thick-ish tube (r/L of the POP-UP links is 0.1–0.15).
+pub fn element_rotary_mass(rho_i: f64, l: f64) -> DMatrix<f64> {
+    let mut m = DMatrix::zeros(12, 12);
+    let c = rho_i / (30.0 * l);
+    let l2 = l * l;
+    let b = [
+        [36.0 * c, 3.0 * l * c, -36.0 * c, 3.0 * l * c],
+        [3.0 * l * c, 4.0 * l2 * c, -3.0 * l * c, -l2 * c],
+        [-36.0 * c, -3.0 * l * c, 36.0 * c, -3.0 * l * c],
+        [3.0 * l * c, -l2 * c, -3.0 * l * c, 4.0 * l2 * c],
+    ];
+    bending_block(&mut m, [1, 5, 7, 11], b, 1.0);
+    bending_block(&mut m, [2, 4, 8, 10], b, -1.0);
+    m
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

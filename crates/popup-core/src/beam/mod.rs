@@ -10,6 +10,8 @@
 
 mod cantilever;
 mod element;
+mod link;
 
 pub use cantilever::{Cantilever, ModeKind, Modes, Rayleigh};
-pub use element::{element_mass, element_stiffness, Section, NDOF_NODE};
+pub use element::{element_mass, element_rotary_mass, element_stiffness, Section, NDOF_NODE};
+pub use link::{BeamLink, BeamMaterial, PRESETS};
