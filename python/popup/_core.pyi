@@ -6,7 +6,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, final
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "closed_loop_rollout", "check_control", "check_scenario", "scenario_set_key", "run_scenario", "control_channels", "gain_names", "EFFECT_NAMES", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
+__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "closed_loop_rollout", "check_control", "check_scenario", "scenario_set_key", "run_scenario", "control_channels", "gain_names", "EFFECT_NAMES", "BEAM_PRESETS", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
 
 __version__: str
 BUILD_PROFILE: str
@@ -62,6 +62,7 @@ def run_scenario(
 ]: ...
 
 EFFECT_NAMES: List[str]
+BEAM_PRESETS: Dict[str, Dict[str, float]]
 
 @final
 class Arm:
@@ -117,6 +118,8 @@ class Model:
     def gravity(self) -> List[float]: ...
     @property
     def joint_names(self) -> List[str]: ...
+    @property
+    def link_models(self) -> List[str]: ...
     @property
     def motor_index(self) -> List[int]: ...
     @property

@@ -81,6 +81,12 @@ def _effects_dict(row: np.ndarray) -> Dict[str, Dict[str, List[float]]]:
     return fx.from_flat(row)
 
 
+#: The thesis's fitted FEM-link materials (section 2.3) by name: ``e_pa`` [Pa], ``wall_m``
+#: [m], ``nu``, ``lambda_s`` [s] (stiffness-proportional damping; the thesis prints
+#: × 10⁴ s, read as × 10⁻⁴ s, docs/beams.md), ``mu_per_s`` [1/s].
+BEAM_PRESETS: Dict[str, Dict[str, float]] = {k: dict(v) for k, v in _core.BEAM_PRESETS.items()}
+
+
 class Model:
     """An arm, simulation options and parameters.
 
@@ -226,6 +232,62 @@ class Model:
         if name not in fx.EFFECTS:
             fx.normalize(name, {})
         return self.with_effects({name: {k: p.neutral for k, p in fx.EFFECTS[name].params.items()}})
+
+    @property
+    def link_models(self) -> List[str]:
+        """Link models of link 1 and 2: ``"prbm"``, ``"prbm(S)"`` (S PRBM segments) or
+        ``"beam(n)"`` (an Euler–Bernoulli beam of n elements, docs/beams.md)."""
+        return list(self._m.link_models)
+
+    def with_links(
+        self,
+        link1: Optional[str] = None,
+        link2: Optional[str] = None,
+        *,
+        preset: Optional[str] = None,
+        **material: Any,
+    ) -> "Model":
+        """A copy with other link models: ``"prbm"`` (one universal joint, the 7-DOF
+        PRBM), ``"prbm(S)"`` (S = 1..3 segments) or ``"beam(n)"`` (n = 1..6 Euler–Bernoulli
+        elements clamped at the link's motor, in the chain's floating frame); ``None`` keeps
+        a link as it is. ``preset`` (a name of :data:`BEAM_PRESETS`, e.g. ``"thesis-1.2mm"``)
+        and ``material`` (``e_pa``, ``wall_m``, ``nu``, ``lambda_s``, ``mu_per_s``,
+        ``shear``; a number for both links or a pair) set the beam material, written to the
+        ``higher_bending_modes`` effect. Beam links need a small ``dt`` with RK4 (the
+        step check names the largest stable one) or ``integrator="semi_implicit"``.
+
+        Example: ``model.with_links("prbm", "beam(4)", preset="thesis-0.8mm")``.
+        """
+        import re
+
+        cur = self.effects_flat
+        from . import effects as fx
+
+        hbm = fx.from_flat(cur).get("higher_bending_modes", {})
+        seg = list(hbm.get("segments", [1.0, 1.0]))
+        el = list(hbm.get("elements", [0.0, 0.0]))
+        for i, spec in enumerate((link1, link2)):
+            if spec is None:
+                continue
+            m = re.fullmatch(r"\s*(prbm|beam)\s*(?:\(\s*(\d+)\s*\))?\s*", str(spec))
+            if m is None:
+                raise InputError(f"input link{i + 1}: {spec!r} is not a link model; use 'prbm', 'prbm(S)' (S = 1..3) or 'beam(n)' (n = 1..6)")
+            kind, num = m.group(1), m.group(2)
+            if kind == "prbm":
+                seg[i], el[i] = float(num or 1), 0.0
+            else:
+                if num is None:
+                    raise InputError(f"input link{i + 1}: {spec!r}: a beam link needs its element count, e.g. 'beam(4)'")
+                seg[i], el[i] = 1.0, float(num)
+        params: Dict[str, Any] = {"segments": seg, "elements": el}
+        if preset is not None:
+            if preset not in BEAM_PRESETS:
+                raise InputError(f"input preset: {preset!r} is not a beam preset; known: {', '.join(BEAM_PRESETS)}")
+            for k, v in BEAM_PRESETS[preset].items():
+                params[k] = [v, v]
+        for k, v in material.items():
+            params[k] = [float(v), float(v)] if np.ndim(v) == 0 else [float(x) for x in v]
+        return self.with_effects({"higher_bending_modes": params})
 
     def _recompiled(self, arm: "_core.Arm") -> "Model":
         dis = list(self._m.disabled)

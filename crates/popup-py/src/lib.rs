@@ -25,6 +25,17 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_raise, m)?)?;
     m.add_function(wrap_pyfunction!(model::effect_registry, m)?)?;
     m.add("EFFECT_NAMES", popup_core::effects::EFFECT_NAMES.to_vec())?;
+    let presets = pyo3::types::PyDict::new(m.py());
+    for (name, mat) in popup_core::beam::PRESETS {
+        let d = pyo3::types::PyDict::new(m.py());
+        d.set_item("e_pa", mat.e)?;
+        d.set_item("wall_m", mat.t)?;
+        d.set_item("nu", mat.nu)?;
+        d.set_item("lambda_s", mat.lambda)?;
+        d.set_item("mu_per_s", mat.mu)?;
+        presets.set_item(name, d)?;
+    }
+    m.add("BEAM_PRESETS", presets)?;
     m.add_function(wrap_pyfunction!(cli::run_cli, m)?)?;
     m.add_function(wrap_pyfunction!(control::closed_loop_rollout, m)?)?;
     m.add_function(wrap_pyfunction!(scenario::check_scenario, m)?)?;

@@ -122,6 +122,11 @@ impl PyModel {
     fn joint_names(&self) -> Vec<String> {
         self.m.joints.iter().map(|j| j.name.clone()).collect()
     }
+    /// Link models, link 1 and 2: `"prbm"`, `"prbm(S)"` (S segments) or `"beam(n)"`.
+    #[getter]
+    fn link_models(&self) -> Vec<String> {
+        (0..2).map(|l| self.m.structure.link_name(l)).collect()
+    }
     /// Chain indices of the motor joints.
     #[getter]
     fn motor_index(&self) -> Vec<usize> {
