@@ -1,9 +1,10 @@
 //! # popup-core
 //!
 //! Deterministic simulation core for inflatable robot arms: the 7-DOF pseudo-rigid-body
-//! (PRBM) chain of the POP-UP arm (expandable at compile time to up to 17 joints: several
-//! segments per link, torsion joints), its rigid 3-DOF kinematics, sensors and batched
-//! rollouts, the controllers, beam elements ([`beam`]) and scenario files ([`scenario`]).
+//! (PRBM) chain of the POP-UP arm (expandable at compile time to up to 31 joints: several
+//! segments per link, Euler–Bernoulli beam links of up to 6 elements ([`beam`]), torsion
+//! joints), its rigid 3-DOF kinematics, sensors and batched rollouts, the controllers and
+//! scenario files ([`scenario`]).
 //! Pure Rust, no Python; the only I/O is the MCAP log writer ([`log`], feature `mcap`).
 //!
 //! Structure: [`spec::ArmSpec`] (editable, TOML) → [`model::Model`] (compiled, immutable)
