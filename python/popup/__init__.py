@@ -27,7 +27,7 @@ from .exceptions import (
     UnknownArmError,
     UnreachableError,
 )
-from .model import Arm, Model, RigidArm, load_arm
+from .model import BEAM_PRESETS, Arm, Model, RigidArm, load_arm
 from .compare import Comparison
 from .io import MeasuredRun, read_run, write_run
 from . import mcaplog
@@ -39,6 +39,8 @@ from . import control
 from .control import Controller, ControlBatch, ControlResult, Obstacle, Phase, Task
 from . import scenario
 from .scenario import Scenario
+from . import setmembership
+from . import sweep
 
 __version__: str = _core.__version__
 build_profile: str = _core.BUILD_PROFILE
@@ -49,6 +51,7 @@ __all__ = [
     "RigidArm",
     "Model",
     "load_arm",
+    "BEAM_PRESETS",
     "SimResult",
     "MeasuredRun",
     "read_run",
@@ -94,6 +97,8 @@ __all__ = [
     "ScenarioError",
     "Scenario",
     "scenario",
+    "setmembership",
+    "sweep",
     "PopupWarning",
     "__version__",
     "build_profile",
