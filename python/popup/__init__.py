@@ -38,6 +38,7 @@ from . import report, synth
 from . import control
 from .control import Controller, ControlBatch, ControlResult, Obstacle, Phase, Task
 from . import scenario
+from . import frequency
 from .scenario import Scenario
 
 __version__: str = _core.__version__
@@ -94,6 +95,7 @@ __all__ = [
     "ScenarioError",
     "Scenario",
     "scenario",
+    "frequency",
     "PopupWarning",
     "__version__",
     "build_profile",

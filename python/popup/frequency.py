@@ -395,8 +395,8 @@ class FRF:
         import pandas as pd
 
         B, F, P = self.H.shape
-        b, f, p = np.meshgrid(np.arange(B), np.arange(F), np.arange(P), indexing="ij")
-        b, f, p = b.ravel(), f.ravel(), p.ravel()
+        grid = np.meshgrid(np.arange(B), np.arange(F), np.arange(P), indexing="ij")
+        b, f, p = (g.ravel() for g in grid)
         h = self.H.ravel()
         ph = np.stack([self.phase_deg(o) for o in self.outputs], axis=-1).ravel()
         d: Dict[str, Any] = {"run": b}
