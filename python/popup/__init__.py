@@ -38,6 +38,7 @@ from . import report, synth
 from . import control
 from .control import Controller, ControlBatch, ControlResult, Obstacle, Phase, Task
 from . import scenario
+from . import frequency
 from .scenario import Scenario
 from . import setmembership
 from . import sweep
@@ -99,6 +100,7 @@ __all__ = [
     "scenario",
     "setmembership",
     "sweep",
+    "frequency",
     "PopupWarning",
     "__version__",
     "build_profile",

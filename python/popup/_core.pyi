@@ -6,7 +6,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, final
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "closed_loop_rollout", "check_control", "check_scenario", "scenario_set_key", "run_scenario", "control_channels", "gain_names", "EFFECT_NAMES", "BEAM_PRESETS", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
+__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "closed_loop_rollout", "closed_loop_rollout_multi", "linearize", "controller_params", "check_control", "check_scenario", "scenario_set_key", "run_scenario", "control_channels", "gain_names", "EFFECT_NAMES", "BEAM_PRESETS", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
 
 __version__: str
 BUILD_PROFILE: str
@@ -42,6 +42,39 @@ def closed_loop_rollout(
     List[List[Tuple[int, float, float, float]]],
     List[List[str]],
 ]: ...
+def closed_loop_rollout_multi(
+    model: Model,
+    texts: Sequence[str],
+    payload_kg: npt.NDArray[np.float64],
+    pressure_pa: npt.NDArray[np.float64],
+    q0: npt.NDArray[np.float64],
+    duration: float,
+    sample_period: float,
+    gains: Optional[npt.NDArray[np.float64]] = None,
+    effects: Optional[npt.NDArray[np.float64]] = None,
+    threads: int = 0,
+    check_step: bool = True,
+    source: str = "<control>",
+) -> Tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    List[Optional[Tuple[str, str]]],
+    List[List[Tuple[float, str, str, str, str]]],
+    List[str],
+    List[List[Tuple[int, float, float, float]]],
+    List[List[str]],
+]: ...
+def linearize(
+    model: Model,
+    payload_kg: npt.NDArray[np.float64],
+    pressure_pa: npt.NDArray[np.float64],
+    q_motor: npt.NDArray[np.float64],
+    input: str,
+    outputs: Sequence[str],
+    t: float = 0.0,
+    effects: Optional[npt.NDArray[np.float64]] = None,
+) -> Dict[str, Any]: ...
+def controller_params(model: Model, text: str, source: str = "<control>") -> Dict[str, Any]: ...
 def check_scenario(text: str, source: str = "<scenario>", base_dir: str = ".") -> List[Tuple[str, int, str, str]]: ...
 def scenario_set_key(text: str, path: str, value: float) -> str: ...
 def run_scenario(

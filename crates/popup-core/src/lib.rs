@@ -21,6 +21,7 @@ pub mod error;
 pub mod forward;
 pub mod integrate;
 pub mod kinematics;
+pub mod linear;
 pub mod math;
 pub mod model;
 pub mod params;

@@ -5,7 +5,7 @@ use crate::errors::{describe, make, IntoPy};
 use crate::model::PyModel;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
-use popup_core::control::config::parse_control;
+use popup_core::control::config::{parse_control, ControlFile};
 use popup_core::control::{gain_names, rollout_closed, ClosedLoop, Gains, CTRL_CHANNELS, NCTRL, NG};
 use popup_core::effects::{Effects, NE};
 use popup_core::params::Params;
@@ -68,10 +68,64 @@ pub fn closed_loop_rollout<'py>(
     check_step: bool,
     source: &str,
 ) -> PyResult<ClosedOut<'py>> {
-    let bad = |m: String| make(py, "InputError", &m);
     let cf = parse_control(&model.m, text, source).py()?;
-    if cf.sequence.phases.is_empty() {
-        return Err(bad(format!("input {source}: the control file has no [[phases]]")));
+    closed_rollout(py, model, vec![cf], payload_kg, pressure_pa, q0, duration, sample_period, gains, effects, threads, check_step, source)
+}
+
+/// [`closed_loop_rollout`] with one control file per job (`texts`, length B): the task, its
+/// reference signals and the controller may differ between the runs of one batch (a
+/// stepped sine is one call, one frequency per job). `gains` (B, NG) overrides each file's
+/// gains when given.
+#[pyfunction]
+#[pyo3(signature = (model, texts, payload_kg, pressure_pa, q0, duration, sample_period, gains = None, effects = None, threads = 0, check_step = true, source = "<control>"))]
+#[allow(clippy::too_many_arguments)]
+pub fn closed_loop_rollout_multi<'py>(
+    py: Python<'py>,
+    model: &PyModel,
+    texts: Vec<String>,
+    payload_kg: PyReadonlyArray1<'py, f64>,
+    pressure_pa: PyReadonlyArray2<'py, f64>,
+    q0: PyReadonlyArray2<'py, f64>,
+    duration: f64,
+    sample_period: f64,
+    gains: Option<PyReadonlyArray2<'py, f64>>,
+    effects: Option<PyReadonlyArray2<'py, f64>>,
+    threads: usize,
+    check_step: bool,
+    source: &str,
+) -> PyResult<ClosedOut<'py>> {
+    let nb = payload_kg.as_array().len();
+    if texts.len() != nb {
+        return Err(make(py, "InputError", &format!("input texts: expected {nb} control files (one per job), got {}", texts.len())));
+    }
+    let cfs = texts.iter().enumerate().map(|(b, t)| parse_control(&model.m, t, &format!("{source}[{b}]")).py()).collect::<PyResult<Vec<_>>>()?;
+    closed_rollout(py, model, cfs, payload_kg, pressure_pa, q0, duration, sample_period, gains, effects, threads, check_step, source)
+}
+
+/// The batch of closed-loop runs: `cfs` holds one control file shared by every job or one
+/// per job.
+#[allow(clippy::too_many_arguments)]
+fn closed_rollout<'py>(
+    py: Python<'py>,
+    model: &PyModel,
+    cfs: Vec<ControlFile>,
+    payload_kg: PyReadonlyArray1<'py, f64>,
+    pressure_pa: PyReadonlyArray2<'py, f64>,
+    q0: PyReadonlyArray2<'py, f64>,
+    duration: f64,
+    sample_period: f64,
+    gains: Option<PyReadonlyArray2<'py, f64>>,
+    effects: Option<PyReadonlyArray2<'py, f64>>,
+    threads: usize,
+    check_step: bool,
+    source: &str,
+) -> PyResult<ClosedOut<'py>> {
+    let bad = |m: String| make(py, "InputError", &m);
+    for (b, cf) in cfs.iter().enumerate() {
+        if cf.sequence.phases.is_empty() {
+            let which = if cfs.len() == 1 { source.to_string() } else { format!("{source}[{b}]") };
+            return Err(bad(format!("input {which}: the control file has no [[phases]]")));
+        }
     }
     let pay = payload_kg.as_array().to_owned();
     let nb = pay.len();
@@ -96,6 +150,7 @@ pub fn closed_loop_rollout<'py>(
     }
     let mut jobs = Vec::with_capacity(nb);
     for b in 0..nb {
+        let cf = &cfs[if cfs.len() == 1 { 0 } else { b }];
         let mut c = cf.controller;
         if let Some(g) = &g {
             let row: [f64; NG] = std::array::from_fn(|i| g[[b, i]]);

@@ -6,6 +6,7 @@ mod arm;
 mod cli;
 mod control;
 mod errors;
+mod frequency;
 mod model;
 mod scenario;
 
@@ -38,6 +39,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("BEAM_PRESETS", presets)?;
     m.add_function(wrap_pyfunction!(cli::run_cli, m)?)?;
     m.add_function(wrap_pyfunction!(control::closed_loop_rollout, m)?)?;
+    m.add_function(wrap_pyfunction!(control::closed_loop_rollout_multi, m)?)?;
+    m.add_function(wrap_pyfunction!(frequency::linearize, m)?)?;
+    m.add_function(wrap_pyfunction!(frequency::controller_params, m)?)?;
     m.add_function(wrap_pyfunction!(scenario::check_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario::scenario_set_key, m)?)?;
     m.add_function(wrap_pyfunction!(scenario::run_scenario, m)?)?;
