@@ -94,6 +94,8 @@ _SCALE: Dict[Tuple[str, str], float] = {
     ("joint_friction", "v_s"): 0.05,
     ("backlash", "gap"): 0.01,
     ("higher_bending_modes", "k_scale"): 0.5,
+    ("higher_bending_modes", "e_pa"): 1e8,
+    ("higher_bending_modes", "lambda_s"): 1e-4,
     ("pressure_leak", "rate"): 0.01,
     ("wrinkling", "ratio"): 0.3,
     ("wrinkling", "mw_scale"): 0.3,
