@@ -55,23 +55,15 @@ STIFF_LINK1 = 1e4
 def _write_section(path: str, key: str, body: str) -> None:
     """Replace (or add) the generated section ``key`` of the shared results page, keeping
     the other sections (their order: beam_vs_prbm, thesis_beam_fit, bench_beam)."""
-    order = ["beam_vs_prbm", "thesis_beam_fit", "bench_beam"]
-    head = (
-        "# PRBM vs Euler–Bernoulli beam links on popup-lab (issue 6)\n\n"
+    popup.report.write_section(
+        path,
+        key,
+        body,
+        order=["beam_vs_prbm", "thesis_beam_fit", "bench_beam"],
+        title="# PRBM vs Euler–Bernoulli beam links on popup-lab (issue 6)\n\n"
         "Each section below is written by the script it names (between its markers); "
-        "rerun the script to refresh it. Beam links: `docs/beams.md`.\n"
+        "rerun the script to refresh it. Beam links: `docs/beams.md`.",
     )
-    sections: Dict[str, str] = {}
-    if os.path.exists(path):
-        text = open(path, encoding="utf-8").read()
-        for m in re.finditer(r"<!-- begin: (\w+) -->\n(.*?)<!-- end: \1 -->\n", text, re.S):
-            sections[m.group(1)] = m.group(2)
-    sections[key] = body.rstrip("\n") + "\n"
-    keys = [k for k in order if k in sections] + [k for k in sections if k not in order]
-    out = head + "".join(f"\n<!-- begin: {k} -->\n{sections[k]}<!-- end: {k} -->\n" for k in keys)
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    with open(path, "w", encoding="utf-8") as f:
-        f.write(out)
 
 
 def largest_stable_dt(model: popup.Model, q: Sequence[float], replay: bool = True) -> float:

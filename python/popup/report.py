@@ -16,11 +16,11 @@ import io
 import json
 import os
 from pathlib import Path
-from typing import Any, List, Union
+from typing import Any, Dict, List, Sequence, Union
 
 from .diagnosis import Diagnosis, History
 
-__all__ = ["write_html", "write_json", "to_html"]
+__all__ = ["write_html", "write_json", "to_html", "write_section"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -109,3 +109,24 @@ def write_json(result: Union[History, Diagnosis], path: PathLike) -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     p.write_text(json.dumps(_as_history(result).to_dict(), indent=1, allow_nan=False), encoding="utf-8")
     return p
+
+
+def write_section(path: PathLike, key: str, body: str, *, title: str, order: Sequence[str] = ()) -> Path:
+    """Replace (or add) the generated section ``key`` of a markdown results page shared by
+    several scripts, keeping the others. Sections sit between ``<!-- begin: key -->`` and
+    ``<!-- end: key -->`` markers, in ``order`` first, then in the order found; ``title``
+    is the page's heading line(s)."""
+    import re
+
+    path = Path(path)
+    sections: Dict[str, str] = {}
+    if path.exists():
+        text = path.read_text(encoding="utf-8")
+        for m in re.finditer(r"<!-- begin: (\w+) -->\n(.*?)<!-- end: \1 -->\n", text, re.S):
+            sections[m.group(1)] = m.group(2)
+    sections[key] = body.rstrip("\n") + "\n"
+    keys = [k for k in order if k in sections] + [k for k in sections if k not in order]
+    out = title.rstrip("\n") + "\n" + "".join(f"\n<!-- begin: {k} -->\n{sections[k]}<!-- end: {k} -->\n" for k in keys)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(out, encoding="utf-8")
+    return path

@@ -7,7 +7,6 @@ use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use popup_core::control::config::{parse_control, ControlFile};
 use popup_core::control::{gain_names, rollout_closed, ClosedLoop, Gains, CTRL_CHANNELS, NCTRL, NG};
-use popup_core::effects::{Effects, NE};
 use popup_core::params::Params;
 use popup_core::sensor::NCH;
 use pyo3::prelude::*;
@@ -142,12 +141,7 @@ fn closed_rollout<'py>(
             return Err(bad(format!("input gains: expected shape ({nb}, {NG}), got {:?}", g.shape())));
         }
     }
-    let fx = effects.map(|a| a.as_array().to_owned());
-    if let Some(f) = &fx {
-        if f.shape() != [nb, NE] {
-            return Err(bad(format!("input effects: expected shape ({nb}, {NE}), got {:?}", f.shape())));
-        }
-    }
+    let fx = crate::model::effects_rows(py, effects, nb, model.m.spec.effects)?;
     let mut jobs = Vec::with_capacity(nb);
     for b in 0..nb {
         let cf = &cfs[if cfs.len() == 1 { 0 } else { b }];
@@ -156,13 +150,7 @@ fn closed_rollout<'py>(
             let row: [f64; NG] = std::array::from_fn(|i| g[[b, i]]);
             c.gains = Gains::from_flat(&row);
         }
-        let effects = match &fx {
-            None => model.m.spec.effects,
-            Some(f) => Effects::from_flat(&f.row(b).to_vec()).map_err(|e| {
-                let (cls, msg) = describe(&e);
-                make(py, &cls, &format!("{msg} (effects row {b})"))
-            })?,
-        };
+        let effects = fx[b];
         let params = Params { payload_kg: pay[b], pressure_pa: [pres[[b, 0]], pres[[b, 1]]], effects };
         let run = ClosedLoop {
             controller: c,

@@ -6,7 +6,6 @@ use crate::model::PyModel;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2};
 use popup_core::control::config::parse_control;
-use popup_core::effects::{Effects, NE};
 use popup_core::linear::{linearize_at_rest, LinearInput};
 use popup_core::params::{ParamData, Params};
 use popup_core::sensor::channel_index;
@@ -54,23 +53,7 @@ pub fn linearize<'py>(
             None => return Err(bad(format!("input outputs: unknown channel {o:?}; channels are {:?}", popup_core::sensor::CHANNELS))),
         }
     }
-    let fx: Vec<Effects> = match effects {
-        None => vec![model.m.spec.effects; nb],
-        Some(a) => {
-            let a = a.as_array();
-            if a.shape() != [nb, NE] {
-                return Err(bad(format!("input effects: expected shape ({nb}, {NE}), got {:?}", a.shape())));
-            }
-            let mut v = Vec::with_capacity(nb);
-            for b in 0..nb {
-                v.push(Effects::from_flat(&a.row(b).to_vec()).map_err(|e| {
-                    let (cls, msg) = describe(&e);
-                    make(py, &cls, &format!("{msg} (effects row {b})"))
-                })?);
-            }
-            v
-        }
-    };
+    let fx = crate::model::effects_rows(py, effects, nb, model.m.spec.effects)?;
     let m = model.m.clone();
     let res = py.detach(move || -> Vec<popup_core::Result<(popup_core::linear::LinearModel, Vec<String>)>> {
         (0..nb)

@@ -268,24 +268,7 @@ impl PyModel {
         if vals.shape()[0] != nb || vals.shape()[2] != 3 || vals.shape()[1] != t.len() {
             return Err(bad(format!("input values: expected shape ({nb}, {}, 3), got {:?}", t.len(), vals.shape())));
         }
-        let fx = match effects {
-            None => vec![self.m.spec.effects; nb],
-            Some(a) => {
-                let a = a.as_array();
-                if a.shape() != [nb, NE] {
-                    return Err(bad(format!("input effects: expected shape ({nb}, {NE}), got {:?}", a.shape())));
-                }
-                let mut v = Vec::with_capacity(nb);
-                for b in 0..nb {
-                    let row: Vec<f64> = a.row(b).to_vec();
-                    v.push(Effects::from_flat(&row).map_err(|e| {
-                        let (cls, msg) = describe(&e);
-                        make(py, &cls, &format!("{msg} (effects row {b})"))
-                    })?);
-                }
-                v
-            }
-        };
+        let fx = effects_rows(py, effects, nb, self.m.spec.effects)?;
         let iq = initial_q.map(|a| a.as_array().to_owned());
         let iv = initial_v.map(|a| a.as_array().to_owned());
         for (name, a) in [("initial_q", &iq), ("initial_v", &iv)] {
@@ -383,4 +366,24 @@ fn logged(model: &Model, job: &Job, path: &str, experiment: String) -> popup_cor
             Err(e)
         }
     }
+}
+
+/// Effects of each of `nb` jobs from a flat `(nb, NE)` array (registry order), or `default`
+/// for every job. Errors name the bad row (and, through the core, the parameter).
+pub(crate) fn effects_rows(py: Python<'_>, effects: Option<PyReadonlyArray2<'_, f64>>, nb: usize, default: Effects) -> PyResult<Vec<Effects>> {
+    let Some(a) = effects else {
+        return Ok(vec![default; nb]);
+    };
+    let a = a.as_array();
+    if a.shape() != [nb, NE] {
+        return Err(make(py, "InputError", &format!("input effects: expected shape ({nb}, {NE}), got {:?}", a.shape())));
+    }
+    (0..nb)
+        .map(|b| {
+            Effects::from_flat(&a.row(b).to_vec()).map_err(|e| {
+                let (cls, msg) = describe(&e);
+                make(py, &cls, &format!("{msg} (effects row {b})"))
+            })
+        })
+        .collect()
 }
