@@ -498,9 +498,10 @@ impl Effects {
         EFFECT_NAMES.iter().copied().filter(|n| !self.is_neutral(n)).collect()
     }
 
-    /// Structural parameters are the compiled model's (segments, whether a torsion joint
-    /// exists); a rollout's `segments` are ignored and its `k_t` matters only where the
-    /// model has a torsion joint.
+    /// Structural parameters are the compiled model's (segments, beam elements, whether a
+    /// torsion joint exists); a rollout's `segments` and `elements` are ignored, its beam
+    /// material acts only on beam links and its `k_t` only where the model has a torsion
+    /// joint.
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] for an infinite `k_t` on a link with a torsion joint.
