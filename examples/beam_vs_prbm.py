@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 import sys
 import time
 import tomllib
@@ -52,39 +51,13 @@ PAYLOADS = (0.0, 1.0, 2.0)
 STIFF_LINK1 = 1e4
 
 
-def _write_section(path: str, key: str, body: str) -> None:
-    """Replace (or add) the generated section ``key`` of the shared results page, keeping
-    the other sections (their order: beam_vs_prbm, thesis_beam_fit, bench_beam)."""
-    popup.report.write_section(
-        path,
-        key,
-        body,
-        order=["beam_vs_prbm", "thesis_beam_fit", "bench_beam"],
-        title="# PRBM vs Euler–Bernoulli beam links on popup-lab (issue 6)\n\n"
-        "Each section below is written by the script it names (between its markers); "
-        "rerun the script to refresh it. Beam links: `docs/beams.md`.",
-    )
-
-
-def largest_stable_dt(model: popup.Model, q: Sequence[float], replay: bool = True) -> float:
-    """The model's dt if the step check passes at q, else the largest stable dt it names."""
-    try:
-        model.core.check_step(model.payload_kg, model.pressure_pa, [float(x) for x in q], replay)
-        return model.dt
-    except popup.StepTooLargeError as e:
-        m = re.search(r"dt <= ([0-9.eE+-]+) s", str(e))
-        if m is None:
-            raise
-        return float(m.group(1))
-
-
 def stable_model(build: Any, period: float, dt_max: float = 1e-4) -> popup.Model:
     """``build(dt)`` at the largest dt <= dt_max dividing ``period`` that the step check
     accepts (with a 10 % margin)."""
     dt = dt_max
     for _ in range(4):
         m = build(dt)
-        lim = largest_stable_dt(m, m.rest_state())
+        lim = m.stable_dt(m.rest_state(), replay=True)
         if lim >= dt:
             return m
         dt = period / math.ceil(period / (0.9 * lim))
@@ -395,7 +368,7 @@ def main(argv: List[str]) -> int:
     say(f"total {secs:.0f} s")
     md[1] = md[1].replace("; plot", f", {secs:.0f} s on {os.cpu_count()} cores; plot")
     if write_doc:
-        _write_section(DOC, "beam_vs_prbm", "\n".join(md) + "\n")
+        popup.report.write_section(DOC, "beam_vs_prbm", "\n".join(md) + "\n")
         say(f"wrote section 'beam_vs_prbm' of {os.path.relpath(DOC, ROOT)}")
     return 0
 

@@ -42,7 +42,6 @@ import argparse
 import dataclasses
 import math
 import os
-import re
 import sys
 import tempfile
 import time
@@ -74,32 +73,6 @@ FS = 500.0  # sample rate of the record [Hz]
 DT_FIT = 5e-5  # semi-implicit step of the fitted model [s] (stable up to E ≈ 2 GPa with 4 elements)
 E_BOUNDS = (2e7, 2e9)
 LAMBDA_BOUNDS = (1e-6, 2e-2)
-
-
-def _write_section(path: str, key: str, body: str) -> None:
-    """Replace (or add) the generated section ``key`` of the shared results page, keeping
-    the other sections (their order: beam_vs_prbm, thesis_beam_fit, bench_beam)."""
-    popup.report.write_section(
-        path,
-        key,
-        body,
-        order=["beam_vs_prbm", "thesis_beam_fit", "bench_beam"],
-        title="# PRBM vs Euler–Bernoulli beam links on popup-lab (issue 6)\n\n"
-        "Each section below is written by the script it names (between its markers); "
-        "rerun the script to refresh it. Beam links: `docs/beams.md`.",
-    )
-
-
-def _largest_stable_dt(model: popup.Model, q: np.ndarray, replay: bool = True) -> float:
-    """The largest stable step the engine's step check names, or the model's dt if it passes."""
-    try:
-        model.core.check_step(model.payload_kg, model.pressure_pa, list(map(float, q)), replay)
-        return model.dt
-    except popup.StepTooLargeError as e:
-        m = re.search(r"dt <= ([0-9.eE+-]+) s", str(e))
-        if m is None:
-            raise
-        return float(m.group(1))
 
 
 def _divisor_dt(limit: float, period: float) -> float:
@@ -231,7 +204,7 @@ def main(argv: List[str]) -> int:
         m = popup.Model("popup-lab", payload_kg=PAYLOAD, dt=1e-4).with_effect(
             "higher_bending_modes", elements=[0, N_EL], e_pa=[f["e"], f["e"]], lambda_s=[f["lam"], f["lam"]], wall_m=[f["wall"], f["wall"]]
         )
-        lim = _largest_stable_dt(m, np.zeros(nv_b))
+        lim = m.stable_dt(np.zeros(nv_b), replay=True)
         dt = _divisor_dt(lim, 1.0 / FS) if lim < 1e-4 else 1e-4
         m = popup.Model("popup-lab", payload_kg=PAYLOAD, dt=dt).with_effects({"higher_bending_modes": fx.from_flat(f["flat"])["higher_bending_modes"]})
         rz = m.replay(t, q_enc, sample_rate=FS, initial_q=np.zeros(nv_b), initial_v=np.zeros(nv_b)).channel("ee_z")
@@ -388,7 +361,7 @@ def main(argv: List[str]) -> int:
             f"underdamped response; it is the value of the presets. Even with it the top finite-element modes "
             f"(ω > 2/λ ≈ {2 / 3.896e-4:.0f} rad/s) are overdamped, which is what makes explicit RK4 need small steps."
         )
-        _write_section(DOC, "thesis_beam_fit", "\n".join(md) + "\n")
+        popup.report.write_section(DOC, "thesis_beam_fit", "\n".join(md) + "\n")
         say(f"wrote section 'thesis_beam_fit' of {os.path.relpath(DOC, ROOT)}")
     return 0
 

@@ -50,3 +50,19 @@ def test_unknown_preset_lists_the_known_ones():
         popup.Model("popup-lab").with_links(link2="beam(2)", preset="nope")
     with pytest.raises(popup.ParameterError, match="wall_m"):
         popup.Model("popup-lab").with_links(link2="beam(2)", wall_m=0.2)
+
+
+def test_stable_dt_is_the_step_checks_limit():
+    m = popup.Model("popup-lab").with_links(link2="beam(3)")
+    lim = m.stable_dt()
+    assert 0 < lim < m.dt  # beam links need a smaller step than 1 ms with RK4
+    with pytest.raises(popup.StepTooLargeError) as ei:
+        m.simulate(torque=m.holding_torque(), duration=0.01)
+    assert ei.value.dt == m.dt and ei.value.dt_max == lim
+    # at (just below) that step the model runs; the PRBM model keeps its own 1 ms
+    dt = max(d for d in (5e-5, 4e-5, 2.5e-5, 2e-5, 1e-5) if d < lim)  # divides the 2 ms sample period
+    ok = popup.Model("popup-lab", dt=dt).with_links(link2="beam(3)")
+    assert ok.stable_dt() == ok.dt
+    r = ok.simulate(torque=ok.holding_torque(), duration=0.002)
+    assert np.all(np.isfinite(r.data))
+    assert popup.Model("popup-lab").stable_dt() == 1e-3

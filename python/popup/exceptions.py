@@ -6,6 +6,8 @@ exception that matches it, so ``except ValueError`` keeps working for bad input.
 
 from __future__ import annotations
 
+from typing import Optional
+
 __all__ = [
     "PopupError",
     "ParameterError",
@@ -53,7 +55,13 @@ class InputError(PopupError, ValueError):
 
 
 class StepTooLargeError(PopupError, ValueError):
-    """The time step is outside the integrator's stability region."""
+    """The time step is outside the integrator's stability region. Raised by the engine's
+    step check, it carries ``dt`` (the step asked for [s]) and ``dt_max`` (the largest
+    stable step [s]); both are ``None`` when the error was re-raised from a batch's
+    message."""
+
+    dt: Optional[float] = None
+    dt_max: Optional[float] = None
 
 
 class DivergenceError(PopupError, RuntimeError):

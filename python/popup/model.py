@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, 
 import numpy as np
 
 from . import _core
-from .exceptions import InputError, PopupWarning
+from .exceptions import InputError, PopupWarning, StepTooLargeError
 from .results import BatchResult, SimResult, WrinkleAlarm
 
 if TYPE_CHECKING:
@@ -334,6 +334,21 @@ class Model:
         ``q_motor``, about the static equilibrium [rad/s], ascending."""
         q = self.rest_state(q_motor)
         return np.asarray(self._m.locked_modes(self.payload_kg, self.pressure_pa, q.tolist()))
+
+    def stable_dt(self, q: Optional[Sequence[float]] = None, *, replay: bool = False) -> float:
+        """This model's ``dt`` [s] if its integrator is stable with it about ``q`` (full
+        joint vector, default :meth:`rest_state`), else the largest stable step the engine's
+        step check finds [s] (the value a run would name in its
+        :class:`~popup.StepTooLargeError`). ``replay``: motors prescribed (encoder replay)
+        instead of torque-driven. Beam links need small steps with RK4 (docs/beams.md)."""
+        qq = self.rest_state() if q is None else np.asarray(q, dtype=np.float64)
+        try:
+            self._m.check_step(self.payload_kg, self.pressure_pa, [float(x) for x in qq], replay)
+        except StepTooLargeError as e:
+            if e.dt_max is None:
+                raise
+            return float(e.dt_max)
+        return self.dt
 
     def holding_torque(self, q_motor: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
         """Motor torques (3,) that hold the arm at rest at ``q_motor`` [N·m]."""

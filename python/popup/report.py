@@ -16,7 +16,7 @@ import io
 import json
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Union
 
 from .diagnosis import Diagnosis, History
 
@@ -111,22 +111,28 @@ def write_json(result: Union[History, Diagnosis], path: PathLike) -> Path:
     return p
 
 
-def write_section(path: PathLike, key: str, body: str, *, title: str, order: Sequence[str] = ()) -> Path:
+def write_section(path: PathLike, key: str, body: str, *, title: Optional[str] = None, order: Sequence[str] = ()) -> Path:
     """Replace (or add) the generated section ``key`` of a markdown results page shared by
-    several scripts, keeping the others. Sections sit between ``<!-- begin: key -->`` and
-    ``<!-- end: key -->`` markers, in ``order`` first, then in the order found; ``title``
-    is the page's heading line(s)."""
+    several scripts, keeping the others and the page's heading. Sections sit between
+    ``<!-- begin: key -->`` and ``<!-- end: key -->`` markers, those named in ``order``
+    first, then in the order found (a new one last). ``title`` heads a new page (or
+    replaces the heading of an existing one)."""
     import re
 
     path = Path(path)
     sections: Dict[str, str] = {}
+    head = title
     if path.exists():
         text = path.read_text(encoding="utf-8")
+        if head is None:
+            head = text.split("<!-- begin: ", 1)[0]
         for m in re.finditer(r"<!-- begin: (\w+) -->\n(.*?)<!-- end: \1 -->\n", text, re.S):
             sections[m.group(1)] = m.group(2)
+    if head is None:
+        head = f"# {path.stem}\n\nEach section below is written by a script (between its markers); rerun it to refresh.\n"
     sections[key] = body.rstrip("\n") + "\n"
     keys = [k for k in order if k in sections] + [k for k in sections if k not in order]
-    out = title.rstrip("\n") + "\n" + "".join(f"\n<!-- begin: {k} -->\n{sections[k]}<!-- end: {k} -->\n" for k in keys)
+    out = head.rstrip("\n") + "\n" + "".join(f"\n<!-- begin: {k} -->\n{sections[k]}<!-- end: {k} -->\n" for k in keys)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(out, encoding="utf-8")
     return path

@@ -6,6 +6,8 @@
 use popup_core::beam::{Cantilever, ModeKind, Rayleigh, Section};
 use std::f64::consts::PI;
 
+mod common;
+
 /// The thesis's first fitted link: E = 0.557 GPa, t = 1.2 mm (popup-lab's radius).
 fn tube() -> Section {
     Section::tube(0.557e9, 0.3, 1100.0, 0.05, 1.2e-3)
@@ -90,18 +92,7 @@ fn tip_mass_frequency_equation() {
     let s = tube();
     let ratio = 2.0;
     let mt = ratio * s.mass_per_length() * L;
-    let f = |b: f64| 1.0 + b.cos() * b.cosh() + ratio * b * (b.cos() * b.sinh() - b.sin() * b.cosh());
-    let (mut lo, mut hi) = (0.1, 1.875);
-    assert!(f(lo) * f(hi) < 0.0);
-    for _ in 0..200 {
-        let mid = 0.5 * (lo + hi);
-        if f(lo) * f(mid) <= 0.0 {
-            hi = mid
-        } else {
-            lo = mid
-        }
-    }
-    let bl = 0.5 * (lo + hi);
+    let bl = common::tip_mass_roots(ratio, 1)[0];
     let exact = bl * bl / (L * L) * (s.e * s.i() / s.mass_per_length()).sqrt();
     let w = Cantilever::new(s, L, 24, mt).unwrap().modes().unwrap().of(ModeKind::BendingY, 1)[0];
     assert!(rel(w, exact) < 1e-6, "{w} vs {exact} (βL = {bl})");

@@ -23,6 +23,8 @@ use popup_core::sim::{rest_state, run, RunConfig, State};
 use popup_core::spec::ArmSpec;
 use popup_core::statics::locked_modes;
 
+mod common;
+
 fn structure(elements: [usize; 2]) -> Structure {
     Structure { elements, ..Structure::default() }
 }
@@ -103,30 +105,6 @@ fn static_tip_deflection_is_pl3_over_3ei() {
     }
 }
 
-/// Roots βL of the tip-mass cantilever frequency equation 1 + cos βL cosh βL +
-/// μ βL (cos βL sinh βL − sin βL cosh βL) = 0 (μ = tip mass / beam mass), the first `k`.
-fn tip_mass_roots(mu: f64, k: usize) -> Vec<f64> {
-    let f = |b: f64| 1.0 + b.cos() * b.cosh() + mu * b * (b.cos() * b.sinh() - b.sin() * b.cosh());
-    let mut out = Vec::new();
-    let mut x = 0.05;
-    while out.len() < k {
-        let (mut lo, mut hi) = (x, x + 0.01);
-        if f(lo) * f(hi) <= 0.0 {
-            for _ in 0..100 {
-                let mid = 0.5 * (lo + hi);
-                if f(lo) * f(mid) <= 0.0 {
-                    hi = mid
-                } else {
-                    lo = mid
-                }
-            }
-            out.push(0.5 * (lo + hi));
-        }
-        x += 0.01;
-    }
-    out
-}
-
 /// The locked-motor modes of a beam link clamped at its motor (link 1 made rigid, gravity
 /// off) converge to the Euler–Bernoulli tip-mass cantilever's first two frequencies as the
 /// element count grows, at second order (the chord-bar mass; docs/beams.md), one per plane.
@@ -142,7 +120,7 @@ fn locked_modes_of_a_beam_link_converge_to_the_tip_mass_cantilever() {
         assert_eq!(modes.len(), 4 * n + 2, "one mode per beam joint plus link 1's two");
         let bl = model.beam[1].as_ref().unwrap();
         let (l, rho_a) = (bl.length, bl.mass_per_length);
-        let roots = tip_mass_roots(2.0 / (rho_a * l), 2);
+        let roots = common::tip_mass_roots(2.0 / (rho_a * l), 2);
         let c = (ei(&model, &p, 1) / rho_a).sqrt() / (l * l);
         let exact: Vec<f64> = roots.iter().map(|b| b * b * c).collect();
         // both planes: modes come in pairs

@@ -28,7 +28,15 @@ pub fn describe(e: &Error) -> (String, String) {
 /// Convert a core error to a Python exception of the matching `popup.exceptions` class.
 pub fn to_py(e: Error) -> PyErr {
     let (cls, msg) = describe(&e);
-    Python::attach(|py| make(py, &cls, &msg))
+    Python::attach(|py| {
+        let err = make(py, &cls, &msg);
+        if let Error::StepTooLarge { dt, dt_max, .. } = e {
+            // the numbers, so that callers need not parse the message
+            let v = err.value(py);
+            let _ = v.setattr("dt", dt).and_then(|_| v.setattr("dt_max", dt_max));
+        }
+        err
+    })
 }
 
 /// Build an exception of class `cls` from `popup.exceptions` (falls back to a built-in

@@ -53,6 +53,23 @@ impl Modes {
     }
 }
 
+/// Assemble `n` equal 12×12 element matrices end to end and keep the DOFs of the free
+/// nodes 1..=n (node 0 clamped): a 6n × 6n matrix.
+pub(crate) fn assemble_free(n: usize, ke: &DMatrix<f64>) -> DMatrix<f64> {
+    let nd = NDOF_NODE * (n + 1);
+    let mut full = DMatrix::zeros(nd, nd);
+    for e in 0..n {
+        let o = NDOF_NODE * e;
+        for i in 0..12 {
+            for j in 0..12 {
+                full[(o + i, o + j)] += ke[(i, j)];
+            }
+        }
+    }
+    let free = nd - NDOF_NODE;
+    full.view((NDOF_NODE, NDOF_NODE), (free, free)).into_owned()
+}
+
 impl Cantilever {
     /// Assemble `n` elements over `length` [m] with `tip_mass` [kg].
     ///
@@ -70,25 +87,12 @@ impl Cantilever {
             return Err(Error::param("beam.tip_mass", tip_mass, "must be finite and >= 0 kg"));
         }
         let l = length / n as f64;
-        let (ke, me) = (element_stiffness(&section, l), element_mass(&section, l));
-        let nd = NDOF_NODE * (n + 1);
-        let (mut kf, mut mf) = (DMatrix::zeros(nd, nd), DMatrix::zeros(nd, nd));
-        for e in 0..n {
-            let o = NDOF_NODE * e;
-            for i in 0..12 {
-                for j in 0..12 {
-                    kf[(o + i, o + j)] += ke[(i, j)];
-                    mf[(o + i, o + j)] += me[(i, j)];
-                }
-            }
-        }
-        let tip = NDOF_NODE * n;
+        let k = assemble_free(n, &element_stiffness(&section, l));
+        let mut m = assemble_free(n, &element_mass(&section, l));
+        let tip = NDOF_NODE * (n - 1);
         for d in 0..3 {
-            mf[(tip + d, tip + d)] += tip_mass;
+            m[(tip + d, tip + d)] += tip_mass;
         }
-        let free = nd - NDOF_NODE;
-        let k = kf.view((NDOF_NODE, NDOF_NODE), (free, free)).into_owned();
-        let m = mf.view((NDOF_NODE, NDOF_NODE), (free, free)).into_owned();
         Ok(Cantilever { section, length, n, tip_mass, k, m })
     }
 

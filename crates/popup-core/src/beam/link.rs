@@ -12,6 +12,7 @@
 //! elastic coordinates only). Downstream bodies (next motor, next link, payload) ride on the
 //! tip node's frame, so the tip masses are the chain's own bodies.
 
+use super::cantilever::assemble_free;
 use super::element::{element_mass, element_rotary_mass, element_stiffness, Section, NDOF_NODE};
 use crate::error::{Error, Result};
 use nalgebra::DMatrix;
@@ -81,20 +82,11 @@ pub struct BeamLink {
     pub m_nodal: DMatrix<f64>,
 }
 
-/// Assemble `n` equal 12×12 element matrices and keep the free nodes' bending DOFs.
+/// The free nodes' bending DOFs (v, w, θy, θz of nodes 1..n) of `n` assembled elements.
 fn assemble_bending(n: usize, ke: &DMatrix<f64>) -> DMatrix<f64> {
-    let nd = NDOF_NODE * (n + 1);
-    let mut full = DMatrix::zeros(nd, nd);
-    for e in 0..n {
-        let o = NDOF_NODE * e;
-        for i in 0..12 {
-            for j in 0..12 {
-                full[(o + i, o + j)] += ke[(i, j)];
-            }
-        }
-    }
-    let idx: Vec<usize> = (1..=n).flat_map(|node| BEND.iter().map(move |&d| NDOF_NODE * node + d)).collect();
-    DMatrix::from_fn(4 * n, 4 * n, |i, j| full[(idx[i], idx[j])])
+    let free = assemble_free(n, ke);
+    let idx: Vec<usize> = (0..n).flat_map(|node| BEND.iter().map(move |&d| NDOF_NODE * node + d)).collect();
+    DMatrix::from_fn(4 * n, 4 * n, |i, j| free[(idx[i], idx[j])])
 }
 
 impl BeamLink {

@@ -65,3 +65,27 @@ pub fn qdiff(a: &State, b: &State) -> f64 {
 pub fn orders(errs: &[f64]) -> Vec<f64> {
     errs.windows(2).map(|w| (w[0] / w[1]).log2()).collect()
 }
+
+/// Roots βL of the tip-mass cantilever frequency equation 1 + cos βL cosh βL +
+/// μ βL (cos βL sinh βL − sin βL cosh βL) = 0 (μ = tip mass / beam mass), the first `k`.
+pub fn tip_mass_roots(mu: f64, k: usize) -> Vec<f64> {
+    let f = |b: f64| 1.0 + b.cos() * b.cosh() + mu * b * (b.cos() * b.sinh() - b.sin() * b.cosh());
+    let mut out = Vec::new();
+    let mut x = 0.05;
+    while out.len() < k {
+        let (mut lo, mut hi) = (x, x + 0.01);
+        if f(lo) * f(hi) <= 0.0 {
+            for _ in 0..100 {
+                let mid = 0.5 * (lo + hi);
+                if f(lo) * f(mid) <= 0.0 {
+                    hi = mid
+                } else {
+                    lo = mid
+                }
+            }
+            out.push(0.5 * (lo + hi));
+        }
+        x += 0.01;
+    }
+    out
+}
