@@ -76,7 +76,7 @@ pub struct Backlash {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct HigherBendingModes {
-    /// Number of PRBM segments per link (1, 2 or 3; structural).
+    /// Number of PRBM segments per link (1, 2 or 3; 0 = a rigid link; structural).
     pub segments: [f64; 2],
     /// Scale of the segment springs per link (1 = same static tip deflection as one joint).
     pub k_scale: [f64; 2],
@@ -287,11 +287,11 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
         unit: "1",
         len: 2,
         neutral: 1.0,
-        lo: 1.0,
+        lo: 0.0,
         hi: 3.0,
         fit: false,
         integer: true,
-        doc: "PRBM segments per link (structural)",
+        doc: "PRBM segments per link, 0 = a rigid link (structural)",
     },
     p("higher_bending_modes", "k_scale", "1", 2, 1.0, 0.05, 20.0, true, "scale of the segment springs per link"),
     ParamSpec {

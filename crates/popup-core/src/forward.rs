@@ -5,11 +5,13 @@
 //! (bending and torsion) joints and `h` is the implicit-damping step of the semi-implicit
 //! integrator (0 for RK4). In replay the motor rows are replaced by the prescribed
 //! accelerations, so the same Cholesky solve gives the passive-joint accelerations with the
-//! motors following the encoders. Everything works on the leading `nv` block.
+//! motors following the encoders. The locked joints of rigid links get q̈ = 0 the same way
+//! (their constraint moments: [`locked_moments`]). Everything works on the leading `nv`
+//! block.
 
 use crate::drive::Drive;
 use crate::dynamics::{crba_into, rnea};
-use crate::math::{cholesky_solve, MatN, VecN};
+use crate::math::{cholesky_solve, Mat3, MatN, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
 
@@ -258,10 +260,49 @@ fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q:
         }
         (Drive::Replay(_), None) => unreachable!("replay accelerations must be prescribed"),
     }
+    for &p in model.locked() {
+        for f in 0..n {
+            m[(f, p)] = 0.0;
+            m[(p, f)] = 0.0;
+        }
+        m[(p, p)] = 1.0;
+        rhs[p] = 0.0;
+    }
     if !cholesky_solve(m, &mut rhs, n) {
         for i in 0..n {
             rhs[i] = f64::NAN;
         }
     }
     rhs
+}
+
+/// Root bending moments carried by the locked joints of rigid links at (q, q̇) with the
+/// joint accelerations `qdd` from the forward dynamics [N·m]: on each locked joint p,
+/// `−(M q̈ + b − τ_drag)_p`, i.e. minus the generalised constraint force, which has the sign
+/// of a spring moment `k δ` (so a rigid link's `m*` channels read like a stiff PRBM link's).
+/// Zero on every other joint and without rigid links. `rot` = `model.rotations(q)`.
+pub fn locked_moments(model: &Model, pd: &ParamData, rot: &[Mat3; crate::math::NMAX], v: &VecN, qdd: &VecN) -> VecN {
+    let mut out = VecN::zeros();
+    if model.nlocked == 0 {
+        return out;
+    }
+    let tau = rnea(model, &pd.body, rot, v, qdd, &model.gravity);
+    let fx = &pd.params.effects;
+    let drag = if fx.air_drag.cd > 0.0 { Some(crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, rot, v)) } else { None };
+    for &p in model.locked() {
+        out[p] = -(tau[p] - drag.map_or(0.0, |d| d[p]));
+    }
+    out
+}
+
+/// [`locked_moments`] at time `t` for the state (q, q̇) under `drive` (prescribed here for
+/// replay): one forward-dynamics evaluation, only when the model has rigid links.
+pub fn locked_moments_at(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN) -> VecN {
+    if model.nlocked == 0 {
+        return VecN::zeros();
+    }
+    let (mut q, mut v) = (*q, *v);
+    let am = prescribe(model, drive, t, &mut q, &mut v);
+    let qdd = accel(model, pd, drive, t, &q, &v, am, 0.0);
+    locked_moments(model, pd, &model.rotations(&q), &v, &qdd)
 }

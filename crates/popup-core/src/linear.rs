@@ -10,9 +10,10 @@
 //! Three ways to drive the motor joints ([`LinearInput`]):
 //!
 //! * `Torque`: the motor torques are the inputs (`tau1..3` [N·m] at the joint outputs, on
-//!   top of the gravity holding torques `u0`); state = every joint `(q, q̇)`, `2 nv`.
+//!   top of the gravity holding torques `u0`); state = every joint `(q, q̇)`, `2 nv` (less
+//!   the locked joints of rigid links, which never move).
 //! * `Acceleration`: the motor joints follow prescribed accelerations (`ddq1..3`
-//!   [rad/s²], the encoder-replay drive); state = every joint, `2 nv`, the motor rows are
+//!   [rad/s²], the encoder-replay drive); state = every unlocked joint, the motor rows are
 //!   double integrators. A prescribed joint *velocity* or *angle* input is this model
 //!   times `s` or `s²` in the frequency domain (`popup.frequency` does that).
 //! * `Locked`: motors held at their angles; state = the passive joints only, no input. Its
@@ -156,10 +157,9 @@ pub fn linearize(model: &Model, pd: &ParamData, q0: &VecN, input: LinearInput, o
     if let Some(&bad) = outputs.iter().find(|&&o| o >= NCH) {
         return Err(Error::input("linearize outputs", format!("channel index {bad} out of range (0..{NCH})")));
     }
-    let nv = model.nv;
     let free: Vec<usize> = match input {
-        LinearInput::Locked => model.passive().to_vec(),
-        _ => (0..nv).collect(),
+        LinearInput::Locked => model.free_joints(true),
+        _ => model.free_joints(false),
     };
     let n = free.len();
     let m = if input == LinearInput::Locked { 0 } else { 3 };

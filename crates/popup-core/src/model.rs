@@ -68,9 +68,11 @@ impl Integrator {
 /// the model's `nv`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Structure {
-    /// Segments per link, 1, 2 or 3 (`higher_bending_modes`): the link's outer part (the
+    /// Segments per link, 0, 1, 2 or 3 (`higher_bending_modes`): the link's outer part (the
     /// body after its universal joint) is split into this many equal pieces, each starting
     /// with its own universal joint (two bending joints). Default 1 (the arm file's chain).
+    /// 0 = a rigid link: its universal joint stays in the chain, locked at δ = 0 (q̈ = 0, no
+    /// spring); its `m*` channels are the constraint moments (see [`Model::locked`]).
     pub segments: [usize; 2],
     /// A torsion joint per link (`torsion`): a revolute joint about the link's own long axis
     /// at the link root, just before its (first) universal joint. Default off.
@@ -92,22 +94,29 @@ impl Structure {
     pub fn is_nominal(&self) -> bool {
         *self == Structure::default()
     }
-    /// Universal joints of link `l` in the chain: S_l for a PRBM link, 2 n_l for a beam link.
+    /// Universal joints of link `l` in the chain: S_l for a PRBM link, 2 n_l for a beam link,
+    /// 1 (locked) for a rigid link.
     pub fn chain_segments(&self, l: usize) -> usize {
         if self.elements[l] > 0 {
             2 * self.elements[l]
         } else {
-            self.segments[l]
+            self.segments[l].max(1)
         }
+    }
+    /// True when link `l` is rigid (`segments[l] == 0`).
+    pub fn is_rigid(&self, l: usize) -> bool {
+        self.segments[l] == 0 && self.elements[l] == 0
     }
     /// Number of joints of the compiled chain: 3 motors + Σ_l (2 S_l + torsion_l) (S_l = 2 n_l
     /// for a beam link).
     pub fn nv(&self) -> usize {
         NM + (0..2).map(|l| 2 * self.chain_segments(l) + usize::from(self.torsion[l])).sum::<usize>()
     }
-    /// The link model of link `l` as users write it: `"prbm"`, `"prbm(S)"` or `"beam(n)"`.
+    /// The link model of link `l` as users write it: `"rigid"`, `"prbm"`, `"prbm(S)"` or
+    /// `"beam(n)"`.
     pub fn link_name(&self, l: usize) -> String {
         match (self.elements[l], self.segments[l]) {
+            (0, 0) => "rigid".into(),
             (0, 1) => "prbm".into(),
             (0, s) => format!("prbm({s})"),
             (n, _) => format!("beam({n})"),
@@ -279,6 +288,12 @@ pub struct Model {
     pub passive_idx: [usize; NPMAX],
     /// Number of passive joints.
     pub npassive: usize,
+    /// Locked joints (the universal joints of rigid links, chain order; the first `nlocked`
+    /// entries): not integrated (q = q̇ = q̈ = 0), no spring; the generalised constraint force
+    /// that holds them is the link's root bending moment.
+    pub locked_idx: [usize; 4],
+    /// Number of locked joints (2 per rigid link).
+    pub nlocked: usize,
     /// The universal joint at the root of each link (first segment): `[d11, d12, d21, d22]`.
     /// Their moments are the `m11..m22` channels (where wrinkling starts).
     pub root_bend_idx: [usize; 4],
@@ -452,7 +467,7 @@ impl Model {
         // the joint structure: `options.structure` or, when that is the default, the arm
         // file's structural effects (multi-segment links, torsion joints)
         let from_effects = Structure {
-            segments: spec.effects.higher_bending_modes.segments.map(|s| if s.is_finite() && s >= 1.0 && s.fract() == 0.0 { s as usize } else { 0 }),
+            segments: spec.effects.higher_bending_modes.segments.map(|s| if s.is_finite() && s >= 0.0 && s.fract() == 0.0 && s <= 3.0 { s as usize } else { usize::MAX }),
             torsion: spec.effects.torsion.k_t.map(|k| k.is_finite()),
             elements: spec.effects.higher_bending_modes.elements.map(|s| if s.is_finite() && s >= 0.0 && s.fract() == 0.0 { s as usize } else { usize::MAX }),
         };
@@ -466,12 +481,21 @@ impl Model {
         }
         for l in 0..2 {
             let s = structure.segments[l];
-            if !(1..=3).contains(&s) {
-                return Err(Error::param(format!("options.structure.segments[{l}] (link {})", l + 1), s, "must be 1, 2 or 3"));
+            if !(0..=3).contains(&s) {
+                let v = if options.structure == Structure::default() { spec.effects.higher_bending_modes.segments[l] } else { s as f64 };
+                let key = if options.structure == Structure::default() { "higher_bending_modes.segments" } else { "options.structure.segments" };
+                return Err(Error::param(format!("{key}[{l}] (link {})", l + 1), v, "must be 0 (rigid link), 1, 2 or 3"));
             }
             let n = structure.elements[l];
             if n > NELEM_MAX {
                 return Err(Error::param(format!("higher_bending_modes.elements[{l}] (link {})", l + 1), n as f64, format!("must be a whole number 0..={NELEM_MAX} (0 = PRBM)")));
+            }
+            if s == 0 && structure.torsion[l] {
+                return Err(Error::param(
+                    format!("torsion.k_t[{l}] (link {})", l + 1),
+                    spec.effects.torsion.k_t[l],
+                    "a rigid link (higher_bending_modes.segments = 0) has no torsion joint: leave k_t unset",
+                ));
             }
             if n > 0 && s != 1 {
                 return Err(Error::param(
@@ -780,7 +804,8 @@ impl Model {
         let mut torsion_idx = [None; 2];
         let mut root_bend_idx = [usize::MAX; 4];
         let mut segment_bend_idx = [[usize::MAX; NSEG_MAX]; 4];
-        let (mut nm, mut nbend, mut npassive) = (0, 0, 0);
+        let mut locked_idx = [usize::MAX; 4];
+        let (mut nm, mut nbend, mut npassive, mut nlocked) = (0, 0, 0, 0);
         for (i, j) in joints.iter().enumerate() {
             match j.kind {
                 JointKind::Motor => {
@@ -788,10 +813,15 @@ impl Model {
                     nm += 1;
                 }
                 JointKind::Bending => {
-                    bend_idx[nbend] = i;
-                    nbend += 1;
-                    passive_idx[npassive] = i;
-                    npassive += 1;
+                    if structure.is_rigid(j.link) {
+                        locked_idx[nlocked] = i;
+                        nlocked += 1;
+                    } else {
+                        bend_idx[nbend] = i;
+                        nbend += 1;
+                        passive_idx[npassive] = i;
+                        npassive += 1;
+                    }
                     let ch = 2 * j.link + j.axis;
                     segment_bend_idx[ch][j.segment - 1] = i;
                     if j.segment == 1 {
@@ -818,6 +848,8 @@ impl Model {
             torsion_idx,
             passive_idx,
             npassive,
+            locked_idx,
+            nlocked,
             root_bend_idx,
             segment_bend_idx,
             segments: [structure.chain_segments(0), structure.chain_segments(1)],
@@ -898,6 +930,28 @@ impl Model {
     #[inline]
     pub fn passive(&self) -> &[usize] {
         &self.passive_idx[..self.npassive]
+    }
+
+    /// Locked joints (the universal joints of rigid links), chain order.
+    #[inline]
+    pub fn locked(&self) -> &[usize] {
+        &self.locked_idx[..self.nlocked]
+    }
+
+    /// True when joint `i` is locked (a rigid link's universal joint).
+    #[inline]
+    pub fn is_locked(&self, i: usize) -> bool {
+        self.locked().contains(&i)
+    }
+
+    /// The joints the integrator moves: all but the locked ones (torque drive) or the
+    /// passive ones (replay, where the motors follow the encoders), chain order.
+    pub fn free_joints(&self, replay: bool) -> Vec<usize> {
+        if replay {
+            self.passive().to_vec()
+        } else {
+            (0..self.nv).filter(|&i| !self.is_locked(i)).collect()
+        }
     }
 
     /// The bending joints of channel `ch` (0..4: d11, d12, d21, d22) in each segment of

@@ -11,10 +11,13 @@
 //! `dd*` the sum of their rates, and `m11..m22`, `m*_ratio` are the moments at the link's
 //! ROOT universal joint (first segment), where the bending moment is largest and wrinkling
 //! starts. The torsion joints have no channel of their own; `energy` includes their springs.
+//!
+//! A rigid link's universal joint is locked: `d*`, `dd*` are 0 and `m*` is the moment the
+//! link's root carries, the constraint force of the lock (sign as `k δ`).
 
 use crate::drive::Drive;
 use crate::dynamics::{crba, forward_pass, rnea};
-use crate::forward::{solve_accel, spring_moments};
+use crate::forward::{locked_moments, solve_accel, spring_moments};
 use crate::kinematics::prbm::{frames_with, Frames};
 use crate::math::{dot_n, mat_vec_row, MatN, Vec3, VecN};
 use crate::model::Model;
@@ -45,9 +48,11 @@ pub fn channel_index(name: &str) -> Option<usize> {
 /// Bending moments `k δ + c δ̇` of the root universal joints `[d11, d12, d21, d22]` [N·m]
 /// and |M|/M_w per link. For a beam link the moments at its clamped root: the first two
 /// rows of `K_φ φ + C_φ φ̇` (the generalised force of a joint that turns the whole beam
-/// about the root is the root moment about that axis).
+/// about the root is the root moment about that axis). For a rigid link the constraint
+/// moments of its locked joint, `locked` (from [`crate::forward::locked_moments`]; zeros
+/// when the model has no rigid link).
 #[inline]
-pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN) -> ([f64; 4], [f64; 2]) {
+pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, locked: &VecN) -> ([f64; 4], [f64; 2]) {
     let d = &model.options.disable;
     let fx = &pd.params.effects;
     let mut m = [0.0; 4];
@@ -82,6 +87,9 @@ pub fn bending_moments(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN
         }
     }
     for (a, &b) in model.root_bend_idx.iter().enumerate() {
+        if model.nlocked > 0 && model.is_locked(b) {
+            m[a] = locked[b];
+        }
         sq[model.joints[b].link] += m[a] * m[a];
     }
     let ratio = std::array::from_fn(|l| {
@@ -188,7 +196,7 @@ pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v:
     }
     row[19] = pd.pressure_at(0, t);
     row[20] = pd.pressure_at(1, t);
-    let (mom, ratio) = bending_moments(model, pd, t, q, v);
+    let (mom, ratio) = bending_moments(model, pd, t, q, v, &locked_moments(model, pd, &rot, v, &qdd));
     for a in 0..4 {
         // sum over the link's segments, root first (exactly q[root] for one segment)
         let js = model.channel_joints(a);

@@ -6,7 +6,7 @@ use crate::effects::play;
 use crate::control::machine::Event;
 use crate::stream::{either, Collect, DelayLine, Flow, Sink, StateView};
 use crate::error::{Error, Result};
-use crate::forward::prescribe;
+use crate::forward::{locked_moments_at, prescribe};
 use crate::integrate::{step_with, Workspace};
 use crate::math::VecN;
 use crate::model::{Integrator, Model};
@@ -86,13 +86,41 @@ pub fn rest_state(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result
     Ok(State { t, q, v: VecN::zeros() })
 }
 
+/// Check a given initial state: finite, zero beyond the model's joints and on the locked
+/// joints of rigid links.
+///
+/// # Errors
+/// [`Error::Input`] naming the joint (or entry) and its values.
+pub fn check_initial(model: &Model, s: &State) -> Result<()> {
+    for i in 0..model.nv {
+        if !s.q[i].is_finite() || !s.v[i].is_finite() {
+            return Err(Error::input("initial state", format!("joint {} has q = {}, v = {}", model.joint_name(i), s.q[i], s.v[i])));
+        }
+        if model.is_locked(i) && (s.q[i] != 0.0 || s.v[i] != 0.0) {
+            return Err(Error::input(
+                "initial state",
+                format!("joint {} has q = {}, v = {}, but it belongs to a rigid link (locked at 0): set both to 0", model.joint_name(i), s.q[i], s.v[i]),
+            ));
+        }
+    }
+    for i in model.nv..s.q.len() {
+        if s.q[i] != 0.0 || s.v[i] != 0.0 {
+            return Err(Error::input(
+                "initial state",
+                format!("entry {i} has q = {}, v = {}, but the model has {} joints: entries beyond them must be 0", s.q[i], s.v[i], model.nv),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Check `dt` against the linearised arm about `q` (free joints: all in torque drive,
 /// passive joints in replay).
 ///
 /// # Errors
 /// [`Error::StepTooLarge`] naming the mode, its joint and the largest stable step.
 pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Result<()> {
-    let free: Vec<usize> = if replay { model.passive().to_vec() } else { (0..model.nv).collect() };
+    let free = model.free_joints(replay);
     let h = model.options.dt;
     let integ = model.options.integrator;
     let eigs = linear_eigs(model, pd, q, &free, integ == Integrator::Rk4);
@@ -265,19 +293,7 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
     let cfg = &RunConfig { drive, ..cfg.clone() };
     let mut st = match cfg.initial {
         Some(s) => {
-            for i in 0..model.nv {
-                if !s.q[i].is_finite() || !s.v[i].is_finite() {
-                    return Err(Error::input("initial state", format!("joint {} has q = {}, v = {}", model.joint_name(i), s.q[i], s.v[i])));
-                }
-            }
-            for i in model.nv..s.q.len() {
-                if s.q[i] != 0.0 || s.v[i] != 0.0 {
-                    return Err(Error::input(
-                        "initial state",
-                        format!("entry {i} has q = {}, v = {}, but the model has {} joints: entries beyond them must be 0", s.q[i], s.v[i], model.nv),
-                    ));
-                }
-            }
+            check_initial(model, &s)?;
             s
         }
         None => {
@@ -299,10 +315,10 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
     let mut open: [Option<usize>; 2] = [None, None];
     let mut row = [0.0; NCH];
     let mut nsample = 0usize;
-    let mut write = |st: &State, row: &mut [f64; NCH], sink: &mut dyn Sink| -> Result<Flow> {
+    let mut write = |st: &State, ratio: [f64; 2], row: &mut [f64; NCH], sink: &mut dyn Sink| -> Result<Flow> {
         let mut q = st.q;
         let mut v = st.v;
-        let f = sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd })?;
+        let f = sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd, ratio })?;
         let am = prescribe(model, &cfg.drive, st.t, &mut q, &mut v);
         sample(model, pd, &cfg.drive, st.t, &q, &v, am, row);
         if let Some(enc) = &encoder {
@@ -313,13 +329,15 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
         nsample += 1;
         Ok(either(f, line.push(row, None, sink)?))
     };
-    let mut track = |st: &State, alarms: &mut Vec<Alarm>, sink: &mut dyn Sink| -> Result<Flow> {
-        let (_, ratio) = bending_moments(model, pd, st.t, &st.q, &st.v);
+    let mut track = |st: &State, alarms: &mut Vec<Alarm>, sink: &mut dyn Sink| -> Result<(Flow, [f64; 2])> {
+        let lock = locked_moments_at(model, pd, &cfg.drive, st.t, &st.q, &st.v);
+        let (_, ratio) = bending_moments(model, pd, st.t, &st.q, &st.v, &lock);
         let before = open;
         track_alarms(&mut open, alarms, st.t, ratio);
-        alarm_events(before, open, alarms, st.t, sink)
+        Ok((alarm_events(before, open, alarms, st.t, sink)?, ratio))
     };
-    let mut flow = either(track(&st, &mut alarms, sink)?, write(&st, &mut row, sink)?);
+    let (f0, ratio) = track(&st, &mut alarms, sink)?;
+    let mut flow = either(f0, write(&st, ratio, &mut row, sink)?);
     let mut ws = Workspace::new();
     for k in 0..nstep {
         if flow == Flow::Stop {
@@ -331,9 +349,10 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
         if let Some(e) = diverged(model, k, t, &st.q, &st.v) {
             return Err(e);
         }
-        flow = track(&st, &mut alarms, sink)?;
+        let (f, ratio) = track(&st, &mut alarms, sink)?;
+        flow = f;
         if (k + 1) % every == 0 {
-            flow = either(flow, write(&st, &mut row, sink)?);
+            flow = either(flow, write(&st, ratio, &mut row, sink)?);
         }
     }
     line.finish(sink)?;

@@ -68,6 +68,9 @@ fn sub(m: &MatN, idx: &[usize]) -> DMatrix<f64> {
 pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<VecN> {
     let mut x = *q;
     let bi = model.passive();
+    if bi.is_empty() {
+        return Ok(x);
+    }
     for it in 0..50 {
         let g = gravity_torque(model, pd, &x);
         let mut r = DVector::<f64>::zeros(bi.len());
@@ -131,6 +134,9 @@ pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<Vec
 /// joint. A negative entry means a statically unstable direction (−√|λ|).
 pub fn locked_modes(model: &Model, pd: &ParamData, q: &VecN) -> Vec<f64> {
     let bi = model.passive();
+    if bi.is_empty() {
+        return Vec::new();
+    }
     let m = sub(&mass_matrix(model, pd, q), bi);
     let k = sub(&stiffness(model, pd, q), bi);
     let l = m.cholesky().expect("passive-joint mass matrix is positive definite").l();
@@ -150,6 +156,9 @@ pub fn locked_modes(model: &Model, pd: &ParamData, q: &VecN) -> Vec<f64> {
 /// treats them implicitly, so only the undamped frequencies limit its step).
 pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with_damping: bool) -> Vec<(Complex<f64>, usize)> {
     let n = free.len();
+    if n == 0 {
+        return Vec::new();
+    }
     let mm = mass_matrix(model, pd, q);
     let kk = stiffness(model, pd, q);
     let cc = if with_damping { damping_matrix(model, pd) } else { MatN::zeros() };

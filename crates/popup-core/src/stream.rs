@@ -35,6 +35,9 @@ pub struct StateView<'a> {
     pub v: &'a VecN,
     /// The parameters in force (payload and pressures change with the task's phases).
     pub pd: &'a ParamData,
+    /// |M|/M_w per link at this state (the `m1_ratio`, `m2_ratio` channels; for a rigid link
+    /// it needs the accelerations, so the run loop, which has them, supplies it).
+    pub ratio: [f64; 2],
 }
 
 /// Receiver of a run's output, in time order per kind. Samples may reach the sink a few

@@ -38,7 +38,7 @@ fn non_finite_samples_are_dropped_and_reported() {
     let mut buf = Cursor::new(Vec::new());
     {
         let mut lg = McapLogger::new(&mut buf, "mem.mcap", &m, &LogOptions::default(), &RunMeta::default(), 0.01, 0.05).unwrap();
-        lg.state(&StateView { t: 0.0, q: &st.q, v: &st.v, pd: &pd }).unwrap();
+        lg.state(&StateView { t: 0.0, q: &st.q, v: &st.v, pd: &pd, ratio: [0.5, 0.2] }).unwrap();
         for k in 0..4 {
             let mut row = [0.5; NCH];
             row[0] = k as f64 * 0.01;

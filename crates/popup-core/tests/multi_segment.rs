@@ -307,7 +307,7 @@ fn channels_sum_segments_root_moments_and_energy() {
 #[test]
 fn bad_structure_is_refused_by_name() {
     let spec = ArmSpec::popup_lab();
-    for (s, what) in [([0, 1], "options.structure.segments[0] (link 1)"), ([1, 4], "options.structure.segments[1] (link 2)")] {
+    for (s, what) in [([4, 1], "options.structure.segments[0] (link 1)"), ([1, 4], "options.structure.segments[1] (link 2)")] {
         match Model::compile(&spec, Options { structure: Structure { segments: s, torsion: [false; 2], elements: [0, 0] }, ..Options::default() }) {
             Err(Error::InvalidParameter { what: w, .. }) => assert_eq!(w, what),
             other => panic!("{s:?}: {other:?}"),

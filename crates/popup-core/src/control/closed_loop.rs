@@ -10,7 +10,7 @@ use crate::control::ClosedLoop;
 use crate::drive::Drive;
 use crate::dynamics::forward_pass;
 use crate::error::{Error, Result};
-use crate::forward::accel_with;
+use crate::forward::{accel_with, locked_moments, locked_moments_at};
 use crate::integrate::{step_with, Workspace};
 use crate::kinematics::prbm::{frames_with, Frames};
 use crate::kinematics::rigid::RigidArm;
@@ -18,7 +18,7 @@ use crate::math::{MatN, Vec3, VecN};
 use crate::model::Model;
 use crate::params::{ParamData, Params};
 use crate::sensor::{bending_moments, sample, NCH};
-use crate::sim::{alarm_events, check_step, diverged, rest_state, track_alarms, Alarm, State, Trajectory};
+use crate::sim::{alarm_events, check_initial, check_step, diverged, rest_state, track_alarms, Alarm, State, Trajectory};
 use crate::stream::{either, Collect, DelayLine, Flow, Sink, StateView};
 use crate::statics::gravity_torque;
 
@@ -224,7 +224,10 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
     let world = CollisionWorld::new(&cfg.obstacles)?;
     let mut pd = ParamData::new(model, params)?;
     let mut st = match cfg.initial {
-        Some(s) => s,
+        Some(s) => {
+            check_initial(model, &s)?;
+            s
+        }
         None => rest_state(model, &pd, 0.0, cfg.q0)?,
     };
     let t0 = st.t;
@@ -277,6 +280,8 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
     let mut status = Status::Completed;
     // |M|/M_w > 1 on either link at the previous controller tick (onset of `continue` alarms)
     let mut wrinkled_prev = false;
+    // |M|/M_w per link at the current state (for the state sink)
+    let mut ratio_now = [0.0; 2];
 
     let phase_name = |cur: usize, fault: &Option<Fault>| -> String {
         match fault {
@@ -346,7 +351,8 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
             }
             // joint 1: lateral (z) difference of the two links; joints 2, 3: in-plane (y) of links 1, 2
             let sig = [arel[0].z - arel[1].z, arel[0].y, arel[1].y];
-            let (_, ratio) = bending_moments(model, &pd, t, &st.q, &st.v);
+            let (_, ratio) = bending_moments(model, &pd, t, &st.q, &st.v, &locked_moments(model, &pd, &rot, &st.v, &qdd));
+            ratio_now = ratio;
             let wrinkled = ratio[0] > 1.0 || ratio[1] > 1.0;
             // collision
             let np = arm_parts(model, &fr, payload_now, cfg.payload_radius, &mut parts, &mut part_link);
@@ -527,7 +533,7 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
             emitted += 1;
         }
         if k % every == 0 {
-            flow = either(flow, sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd: &pd })?);
+            flow = either(flow, sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd: &pd, ratio: ratio_now })?);
             sample(model, &pd, &drive, st.t, &st.q, &st.v, None, &mut row);
             flow = either(flow, line.push(&row, Some(&out), sink)?);
             nsample += 1;
@@ -553,7 +559,8 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
             status = Status::Unstable;
             break;
         }
-        let (_, rt) = bending_moments(model, &pd, st.t, &st.q, &st.v);
+        let (_, rt) = bending_moments(model, &pd, st.t, &st.q, &st.v, &locked_moments_at(model, &pd, &drive, st.t, &st.q, &st.v));
+        ratio_now = rt;
         let before = open;
         track_alarms(&mut open, &mut alarms, st.t, rt);
         alarm_events(before, open, &alarms, st.t, sink)?;

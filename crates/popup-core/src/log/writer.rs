@@ -11,7 +11,7 @@ use crate::kinematics::prbm::frames_with;
 use crate::math::{Vec3, NMAX};
 use crate::model::Model;
 use crate::params::ParamData;
-use crate::sensor::{bending_moments, NCH};
+use crate::sensor::NCH;
 use crate::stream::{Flow, Sink, StateView};
 use mcap::records::{MessageHeader, Metadata};
 use std::collections::BTreeMap;
@@ -329,7 +329,7 @@ impl<W: Write + Seek> Sink for McapLogger<'_, W> {
         self.tf = tf;
         if let Some(mut ch) = self.scene {
             let pd: &ParamData = s.pd;
-            let (_, ratio) = bending_moments(model, pd, s.t, s.q, s.v);
+            let ratio = s.ratio;
             let mut parts = [Capsule { a: [0.0; 3], b: [0.0; 3], radius: 0.0 }; NMAX + 1];
             let mut link = [0usize; NMAX + 1];
             let np = arm_parts(model, &fr, pd.params.payload_kg, self.payload_radius, &mut parts, &mut link);
