@@ -218,7 +218,8 @@ def test_closed_loop_rollout_multi_equals_one_task_per_call():
 
 
 def test_rigid_links_push_the_bending_modes_up(model):
-    r = fr.rigid_links(model)
+    assert fr.rigid_links(model).link_models == ["rigid", "rigid"]
+    r = fr.rigid_links(model, factor=1e4)
     w = np.sort(fr.linearize(r, input="locked").modes().wn)
     assert w[0] > 100 * 14.0
     assert r.payload_kg == model.payload_kg

@@ -36,7 +36,7 @@ kind           what drives the motor joints          unit        engine run
 ============== ===================================== =========== ==========================
 
 The link model is the one of the :class:`popup.Model` passed in; :func:`rigid_links` makes a
-quasi-rigid copy (bending stiffness × 10⁴). A model with other link types (beam links) is
+rigid copy (the links' universal joints locked). A model with other link types (beam links) is
 passed the same way.
 
 Units: ω in rad/s everywhere, magnitudes as ratios (output unit per input unit) and dB
@@ -574,12 +574,13 @@ def _controller_text(controller: Any) -> str:
     raise InputError(f"input controller: expected a popup.control.Controller or Task, got {type(controller).__name__}")
 
 
-def _close_loop(plant: Dict[str, Any], ctrl: Dict[str, Any], motor_idx: List[int], nv: int, mode: str, delay: bool) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, List[str]]:
+def _close_loop(plant: Dict[str, Any], ctrl: Dict[str, Any], motor_pos: List[int], nv: int, mode: str, delay: bool) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, List[str]]:
     """Continuous-time closed loop around the torque-input plant (B, ...) arrays: velocity
     PI (Kp_v, Ki_v, c_u) → current loop (first-order lag ω_i) → [ZOH half-period delay,
     first-order Padé] → plant; with ``mode == "reference"`` the position PI in front.
     Inputs: the three velocity references (``velocity``) or position references
-    (``reference``)."""
+    (``reference``). ``motor_pos``: the motors' positions among the plant's ``nv`` joint
+    states."""
     g = np.asarray(ctrl["gains"], dtype=np.float64)
     kpq, kiq, kpv, kiv = g[0:3], g[3:6], g[6:9], g[9:12]
     cu = np.array([m["torque_per_unit"] for m in ctrl["motors"]])
@@ -613,7 +614,7 @@ def _close_loop(plant: Dict[str, Any], ctrl: Dict[str, Any], motor_idx: List[int
     D = np.zeros((nb, p, 3))
     q_rows = np.zeros((3, N))
     v_rows = np.zeros((3, N))
-    for k, i in enumerate(motor_idx):
+    for k, i in enumerate(motor_pos):
         q_rows[k, i] = 1.0
         v_rows[k, nv + i] = 1.0
     # v* = Vx X + Vu r
@@ -740,7 +741,10 @@ def linearize(
             raise InputError("input controller: the linearised loop does not model the damping PIDs (damping is on); use popup.frequency.simulate, or Controller(damping=False)")
         if delay is None:
             delay = not all(np.isfinite(m["current_bandwidth"]) for m in ctrl["motors"])
-        a, b, c, d, extra = _close_loop({"a": a, "b": b, "c": c, "d": d}, ctrl, list(model.core.motor_index), n2 // 2, input, bool(delay))
+        # the motors' places in the state (rigid links' locked joints are not states)
+        free = [int(j) for j in r["free"]]
+        motor_pos = [free.index(int(i)) for i in model.core.motor_index]
+        a, b, c, d, extra = _close_loop({"a": a, "b": b, "c": c, "d": d}, ctrl, motor_pos, n2 // 2, input, bool(delay))
         states = states + extra
         inputs = [f"{'v' if input == 'velocity' else 'r'}{k + 1}_ref" for k in range(3)]
         info["controller"] = ctrl
@@ -766,15 +770,15 @@ def linearize(
 
 
 # =============================================================================== link models
-def rigid_links(model: "Model", factor: float = 1e4) -> "Model":
-    """A quasi-rigid copy of ``model``: the bending stiffness table × ``factor`` (damping
-    unchanged), so the bending modes move up by √factor (×100: above 1500 rad/s for
-    ``popup-lab``) and the links act as rigid bodies below them. Payload and pressures
-    are kept. (Scaling the links' ``stiffness_scale`` would scale the damping too and make
-    the chain stiff for the explicit integrator.)"""
+def rigid_links(model: "Model", factor: Optional[float] = None) -> "Model":
+    """A copy of ``model`` with rigid links: by default truly rigid (both links
+    ``"rigid"``, :meth:`popup.Model.with_links`: the universal joints locked, the root
+    moments are the constraint moments). With ``factor`` instead the quasi-rigid PRBM of
+    earlier versions: the bending stiffness table × ``factor`` (damping unchanged), the
+    bending modes moved up by √factor. Payload and pressures are kept."""
+    if factor is None:
+        return model.with_links("rigid", "rigid")
     import tomllib
-
-    from .model import Model
 
     d = tomllib.loads(model.arm.to_toml())
     k = [float(x) * factor for x in d["stiffness"]["k_nm_per_rad"]]

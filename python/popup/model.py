@@ -235,8 +235,8 @@ class Model:
 
     @property
     def link_models(self) -> List[str]:
-        """Link models of link 1 and 2: ``"prbm"``, ``"prbm(S)"`` (S PRBM segments) or
-        ``"beam(n)"`` (an Euler–Bernoulli beam of n elements, docs/beams.md)."""
+        """Link models of link 1 and 2: ``"rigid"``, ``"prbm"``, ``"prbm(S)"`` (S PRBM
+        segments) or ``"beam(n)"`` (an Euler–Bernoulli beam of n elements, docs/beams.md)."""
         return list(self._m.link_models)
 
     def with_links(
@@ -247,10 +247,11 @@ class Model:
         preset: Optional[str] = None,
         **material: Any,
     ) -> "Model":
-        """A copy with other link models: ``"prbm"`` (one universal joint, the 7-DOF
-        PRBM), ``"prbm(S)"`` (S = 1..3 segments) or ``"beam(n)"`` (n = 1..6 Euler–Bernoulli
-        elements clamped at the link's motor, in the chain's floating frame); ``None`` keeps
-        a link as it is. ``preset`` (a name of :data:`BEAM_PRESETS`, e.g. ``"thesis-1.2mm"``)
+        """A copy with other link models: ``"rigid"`` (the link's universal joint locked at
+        zero; its ``m*`` channels are the constraint moments at its root), ``"prbm"`` (one
+        universal joint, the 7-DOF PRBM), ``"prbm(S)"`` (S = 1..3 segments) or
+        ``"beam(n)"`` (n = 1..6 Euler–Bernoulli elements clamped at the link's motor, in the
+        chain's floating frame); ``None`` keeps a link as it is. ``preset`` (a name of :data:`BEAM_PRESETS`, e.g. ``"thesis-1.2mm"``)
         and ``material`` (``e_pa``, ``wall_m``, ``nu``, ``lambda_s``, ``mu_per_s``,
         ``shear``; a number for both links or a pair) set the beam material, written to the
         ``higher_bending_modes`` effect. Beam links need a small ``dt`` with RK4 (the
@@ -269,11 +270,15 @@ class Model:
         for i, spec in enumerate((link1, link2)):
             if spec is None:
                 continue
-            m = re.fullmatch(r"\s*(prbm|beam)\s*(?:\(\s*(\d+)\s*\))?\s*", str(spec))
+            m = re.fullmatch(r"\s*(rigid|prbm|beam)\s*(?:\(\s*(\d+)\s*\))?\s*", str(spec))
             if m is None:
-                raise InputError(f"input link{i + 1}: {spec!r} is not a link model; use 'prbm', 'prbm(S)' (S = 1..3) or 'beam(n)' (n = 1..6)")
+                raise InputError(f"input link{i + 1}: {spec!r} is not a link model; use 'rigid', 'prbm', 'prbm(S)' (S = 1..3) or 'beam(n)' (n = 1..6)")
             kind, num = m.group(1), m.group(2)
-            if kind == "prbm":
+            if kind == "rigid":
+                if num is not None:
+                    raise InputError(f"input link{i + 1}: {spec!r}: a rigid link takes no count; use 'rigid'")
+                seg[i], el[i] = 0.0, 0.0
+            elif kind == "prbm":
                 seg[i], el[i] = float(num or 1), 0.0
             else:
                 if num is None:

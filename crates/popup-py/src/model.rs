@@ -122,7 +122,7 @@ impl PyModel {
     fn joint_names(&self) -> Vec<String> {
         self.m.joints.iter().map(|j| j.name.clone()).collect()
     }
-    /// Link models, link 1 and 2: `"prbm"`, `"prbm(S)"` (S segments) or `"beam(n)"`.
+    /// Link models, link 1 and 2: `"rigid"`, `"prbm"`, `"prbm(S)"` (S segments) or `"beam(n)"`.
     #[getter]
     fn link_models(&self) -> Vec<String> {
         (0..2).map(|l| self.m.structure.link_name(l)).collect()
@@ -136,6 +136,11 @@ impl PyModel {
     #[getter]
     fn bend_index(&self) -> Vec<usize> {
         self.m.bend().to_vec()
+    }
+    /// Chain indices of the locked joints (the universal joints of rigid links).
+    #[getter]
+    fn locked_index(&self) -> Vec<usize> {
+        self.m.locked().to_vec()
     }
     /// Wrinkling coefficient c in M_w = c · p · r³.
     #[getter]
