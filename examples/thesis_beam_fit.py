@@ -16,19 +16,15 @@ with link 2 an Euler–Bernoulli beam of 4 elements (link 1 stays PRBM in both),
 wall thickness of each thesis preset held fixed (1.2 mm and 0.8 mm) and E, λ of link 2
 free.
 
-Fitting machinery: the diagnosis's own least squares (``popup.diagnosis._Problem`` and
-``_fit``: bounded trust-region-reflective least squares on the normalised free-run
-residual, forward-difference Jacobians as batched rollouts over flat effect vectors).
-They are private helpers (there is no public "fit these parameters of an effect" entry
-point yet), used here with three local adjustments, all visible below: the PRBM run is
-written and read back as a measured run (``popup.io.from_sim`` / ``write_run`` /
-``read_run``); the problem's initial state is set to the undeflected state (the
-``[initial]`` table of a measured run only knows the four PRBM channel angles, not a beam
-link's node joints); and E and λ, which have no typical scale in the diagnosis's
-``_SCALE`` table (they are not fitted by default), get one for the duration of the fit
-(``unittest.mock.patch.dict``), with bounds narrowed to a physical range. A batched grid
-of seeds (one rollout) picks the start, since a ringing response is not convex in the
-stiffness.
+Fitting machinery: :func:`popup.fit_params`, the diagnosis's own least squares (bounded
+trust-region-reflective least squares on the normalised free-run residual,
+forward-difference Jacobians as batched rollouts over flat effect vectors) for any named
+effect parameters: here ``higher_bending_modes.e_pa[1]`` and ``lambda_s[1]`` with bounds
+narrowed to a physical range, a batched grid of seeds (one rollout; a ringing response is
+not convex in the stiffness), and the undeflected initial state (the ``[initial]`` table
+of a measured run only knows the four PRBM channel angles, not a beam link's node joints).
+The PRBM run is written and read back as a measured run (``popup.io.from_sim`` /
+``write_run`` / ``read_run``).
 
 Motors locked by encoder replay, not by constant holding torques: with
 ``Model.simulate(holding_torque, initial_q=0)`` the motors are free inertias under a
@@ -39,7 +35,6 @@ which mixes a rigid-body motion into the tip signal; the replay holds them exact
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import os
 import sys
@@ -47,12 +42,10 @@ import tempfile
 import time
 import tomllib
 from typing import Any, Dict, List, Tuple
-from unittest import mock
 
 import numpy as np
 
 import popup
-from popup import diagnosis as dg
 from popup import effects as fx
 from popup.io import from_sim, read_run, write_run
 
@@ -144,31 +137,21 @@ def main(argv: List[str]) -> int:
         "higher_bending_modes", elements=[0, N_EL]
     )
     nv_b = len(beam.joint_names)
-    base_flat = beam.effects_flat
-    pe, pl, pw = HBM.params["e_pa"], HBM.params["lambda_s"], HBM.params["wall_m"]
-    free = [
-        (dataclasses.replace(pe, lower=E_BOUNDS[0], upper=E_BOUNDS[1]), 1),
-        (dataclasses.replace(pl, lower=LAMBDA_BOUNDS[0], upper=LAMBDA_BOUNDS[1]), 1),
-    ]
-    scales = {("higher_bending_modes", "e_pa"): 1e8, ("higher_bending_modes", "lambda_s"): 1e-4}
-
-    def flat(e: float, lam: float, wall: float) -> np.ndarray:
-        f = base_flat.copy()
-        f[pe.offset + 1] = e
-        f[pl.offset + 1] = lam
-        f[pw.offset + 1] = wall
-        return f
+    free = ["higher_bending_modes.e_pa[1]", "higher_bending_modes.lambda_s[1]"]
 
     with tempfile.TemporaryDirectory() as tmp:
         df = from_sim(res_p, description="PRBM reference of the thesis's beam-fit experiment")
         write_run(os.path.join(tmp, "prbm"), df.attrs["experiment"], df)
         run = read_run(os.path.join(tmp, "prbm"))
-    prob = dg._Problem(beam, run, ["ee_z"], FS, a.threads)
-    prob.iq, prob.iv = np.zeros(nv_b), np.zeros(nv_b)  # undeflected start (see module docs)
 
-    def nrmse(flats: np.ndarray) -> np.ndarray:
-        r = prob.residuals(prob.simulate(np.atleast_2d(flats)))
-        return np.sqrt(np.mean(r.reshape(r.shape[0], -1) ** 2, axis=1))
+    def material(e: float, lam: float, wall: float) -> popup.Model:
+        return beam.with_effect("higher_bending_modes", e_pa=[e, e], lambda_s=[lam, lam], wall_m=[wall, wall])
+
+    def z_of(model: popup.Model) -> np.ndarray:
+        return model.replay(t, q_enc, sample_rate=FS, initial_q=np.zeros(nv_b), initial_v=np.zeros(nv_b)).channel("ee_z")
+
+    def nrmse(model: popup.Model) -> float:
+        return float(np.sqrt(np.mean((z_of(model) - z_p) ** 2)) / np.std(z_p))
 
     say("")
     say(f"fitted model: link 2 beam({N_EL}) (Euler–Bernoulli, no shear), semi-implicit dt = {DT_FIT:g} s; free: e_pa[1], lambda_s[1]")
@@ -176,25 +159,30 @@ def main(argv: List[str]) -> int:
     ne, nl = (7, 2) if a.quick else (11, 3)
     for name, e_th, wall, lam_th, lam_printed in THESIS:
         e_match = k2 * L / (3.0 * math.pi * r2**3 * wall)
-        # seeds: a log grid of E × λ in one batched rollout
-        grid = [(e, lam) for e in np.geomspace(3e7, 1.5e9, ne) for lam in np.geomspace(2e-4, 2e-3, nl)]
-        errs = nrmse(np.array([flat(e, lam, wall) for e, lam in grid]))
-        e0, lam0 = grid[int(np.nanargmin(errs))]
-        f0 = flat(e0, lam0, wall)
         tf = time.perf_counter()
-        n0 = prob.nfev
-        with mock.patch.dict(dg._SCALE, scales):
-            x, fflat, r, _J = dg._fit(prob, f0, free, np.array([e0, lam0]), max_iter=40)
-        err_fit = float(np.sqrt(np.mean(r**2)))
-        err_th = float(nrmse(flat(e_th, lam_th, wall))[0])
-        err_match = float(nrmse(flat(e_match, c2 / k2, wall))[0])
+        fit = popup.fit_params(
+            material(e_th, lam_th, wall),
+            run,
+            free,
+            bounds={free[0]: E_BOUNDS, free[1]: LAMBDA_BOUNDS},
+            grid={free[0]: np.geomspace(3e7, 1.5e9, ne), free[1]: np.geomspace(2e-4, 2e-3, nl)},
+            channels=["ee_z"],
+            sample_rate=FS,
+            initial_q=np.zeros(nv_b),
+            initial_v=np.zeros(nv_b),
+            threads=a.threads,
+            max_iter=40,
+        )
+        e_fit, lam_fit = (float(v) for v in fit.x)
+        e0, lam0 = (float(v) for v in fit.x0)
         fits.append(
             dict(name=name, wall=wall, e_th=e_th, lam_th=lam_th, lam_printed=lam_printed, e_match=e_match, e0=e0, lam0=lam0,
-                 e=float(x[0]), lam=float(x[1]), err=err_fit, err_th=err_th, err_match=err_match,
-                 nfev=prob.nfev - n0, secs=time.perf_counter() - tf, flat=fflat)
+                 e=e_fit, lam=lam_fit, err=fit.error, err_th=nrmse(material(e_th, lam_th, wall)), err_match=nrmse(material(e_match, c2 / k2, wall)),
+                 nfev=fit.nfev, secs=fit.seconds, model=fit.model, ci=fit.ci95)
         )
-        say(f"  t = {wall * 1e3:.1f} mm: seed E = {e0 / 1e6:.0f} MPa, λ = {lam0:.2e} s (grid {len(grid)} runs); "
-            f"fit: E = {x[0] / 1e6:.2f} MPa, λ = {x[1]:.4e} s, NRMSE {err_fit:.4f} ({prob.nfev - n0} rollouts, {time.perf_counter() - tf:.1f} s)")
+        say(f"  t = {wall * 1e3:.1f} mm: seed E = {e0 / 1e6:.0f} MPa, λ = {lam0:.2e} s (grid {ne * nl} runs); "
+            f"fit: E = {e_fit / 1e6:.2f} ± {fit.ci95[0] / 1e6:.2f} MPa, λ = {lam_fit:.4e} ± {fit.ci95[1]:.1e} s, NRMSE {fit.error:.4f} "
+            f"({fit.nfev} rollouts, {time.perf_counter() - tf:.1f} s)")
 
     # ------------------------------------------------------------- check with RK4
     say("")
@@ -206,9 +194,9 @@ def main(argv: List[str]) -> int:
         )
         lim = m.stable_dt(np.zeros(nv_b), replay=True)
         dt = _divisor_dt(lim, 1.0 / FS) if lim < 1e-4 else 1e-4
-        m = popup.Model("popup-lab", payload_kg=PAYLOAD, dt=dt).with_effects({"higher_bending_modes": fx.from_flat(f["flat"])["higher_bending_modes"]})
+        m = popup.Model("popup-lab", payload_kg=PAYLOAD, dt=dt).with_effects({"higher_bending_modes": f["model"].effects["higher_bending_modes"]})
         rz = m.replay(t, q_enc, sample_rate=FS, initial_q=np.zeros(nv_b), initial_v=np.zeros(nv_b)).channel("ee_z")
-        zs = prob.simulate(f["flat"])[0, :, 0]
+        zs = z_of(f["model"])
         e_rk4 = float(np.sqrt(np.mean((rz - z_p) ** 2)) / np.std(z_p))
         wb = m.locked_modes()
         f.update(dt_rk4=dt, err_rk4=e_rk4, semi_vs_rk4=float(np.max(np.abs(zs - rz))), modes=wb, z=rz)
@@ -244,8 +232,8 @@ def main(argv: List[str]) -> int:
     # simulate: the read value, and the largest λ the registry allows (1 s, ζ1 ≈ 7). Link 2's
     # own bending (d22, the beam's tip rotation) shows it: the tip position also carries link
     # 1's PRBM ringing, which link 2's damping does not touch.
-    lam_max = float(pl.upper)
-    fl = np.array([flat(0.557e9, 3.896e-4, 1.2e-3), flat(0.557e9, lam_max, 1.2e-3)])
+    lam_max = float(HBM.params["lambda_s"].upper)
+    fl = np.array([material(0.557e9, lam, 1.2e-3).effects_flat for lam in (3.896e-4, lam_max)])
     rb = beam.rollout(encoder_t=t, encoder_q=q_enc, initial_q=np.zeros(nv_b), initial_v=np.zeros(nv_b), sample_rate=FS, effects=fl, threads=a.threads)
     m_th = beam.with_effect("higher_bending_modes", e_pa=[0.557e9, 0.557e9], wall_m=[1.2e-3, 1.2e-3])
     d22_static = float(m_th.replay(t[:2], q_enc[:2], sample_rate=FS, initial_q=m_th.rest_state()).channel("d22")[0])
@@ -304,8 +292,8 @@ def main(argv: List[str]) -> int:
             f"{FS:.0f} Hz for {T:g} s. Reference: the PRBM (link 2 one universal joint, k = {k2:.0f} N·m/rad, "
             f"c = {c2:.3f} N·m·s/rad; RK4, dt = 0.1 ms). Fitted: the same arm with link 2 a beam of {N_EL} "
             f"Euler–Bernoulli elements (link 1 PRBM in both), wall thickness held at each thesis preset's, E and λ "
-            f"of link 2 free, bounded least squares on the normalised residual with the diagnosis's `_Problem` / "
-            f"`_fit` (seeded by a {ne} × {nl} grid in one batched rollout; semi-implicit, dt = {DT_FIT:g} s; "
+            f"of link 2 free, bounded least squares on the normalised residual with `popup.fit_params` (the "
+            f"diagnosis's machinery; seeded by a {ne} × {nl} grid in one batched rollout; semi-implicit, dt = {DT_FIT:g} s; "
             f"the results rerun with RK4 below).\n"
         )
         md.append("| wall t | fitted E | fitted λ | NRMSE fit | NRMSE (RK4 rerun) | E matched to k (k L/3 = EI) | thesis E | thesis λ | NRMSE of thesis values |")

@@ -34,6 +34,7 @@ from . import mcaplog
 from .mcaplog import RunLog, read_log
 from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
 from .diagnosis import Diagnosis, History, Suspect, diagnose, improve
+from .fit import FitResult, fit_params
 from . import report, synth
 from . import control
 from .control import Controller, ControlBatch, ControlResult, Obstacle, Phase, Task
@@ -66,6 +67,8 @@ __all__ = [
     "effects",
     "diagnose",
     "improve",
+    "fit_params",
+    "FitResult",
     "Diagnosis",
     "History",
     "Suspect",

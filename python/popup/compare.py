@@ -763,13 +763,15 @@ def _initial_state(model: "Model", run: MeasuredRun, q0: np.ndarray, notes: List
         return None, None
     q = model.rest_state([float(x) for x in q0])
     v = np.zeros(len(jn))
+    locked = set(model.core.locked_index)
     for n, x in zip(names, d):
-        if np.isfinite(float(x)):
+        if np.isfinite(float(x)) and jn.index(n) not in locked:
             q[jn.index(n)] = float(x)
     if dd is not None:
         for n, x in zip(rates, dd):
-            v[jn.index(n)] = float(x)
-    notes.append("initial bending angles and rates from the run's [initial] table")
+            if jn.index(n) not in locked:
+                v[jn.index(n)] = float(x)
+    notes.append("initial bending angles and rates from the run's [initial] table" + (" (a rigid link's stay 0)" if locked else ""))
     return q, v
 
 

@@ -570,14 +570,16 @@ def _fit(
     free: List[Tuple[fx.EffectParam, int]],
     x0: np.ndarray,
     max_iter: int,
+    scale: Optional[np.ndarray] = None,
 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Bounded least squares over the `free` (parameter, index) entries of the flat vector.
-    Returns (x, flat, residual (n, C), J at x (m, k))."""
+    """Bounded least squares over the `free` (parameter, index) entries of the flat vector
+    (bounds: the parameters' ``lower``/``upper``; typical magnitudes ``scale``, default
+    :data:`_SCALE`). Returns (x, flat, residual (n, C), J at x (m, k))."""
     from scipy.optimize import least_squares
 
     lo = np.array([p.lower for p, _ in free])
     hi = np.array([p.upper for p, _ in free])
-    sc = np.array([_SCALE.get((p.effect, p.name), 1.0) for p, _ in free])
+    sc = np.array([_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, dtype=float)
     idx = np.array([p.offset + i for p, i in free])
     # a start on a bound stalls the trust-region-reflective steps (their scaling is the
     # distance to the bound): start a fraction of the typical scale inside
