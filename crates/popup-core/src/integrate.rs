@@ -4,6 +4,7 @@
 //! spline in replay. Neither allocates.
 
 use crate::drive::Drive;
+use crate::dynamics::articulated::accel_articulated;
 use crate::forward::{accel_with, prescribe};
 use crate::math::{MatN, VecN};
 use crate::model::{Integrator, Model};
@@ -45,10 +46,17 @@ pub fn step_with(model: &Model, pd: &ParamData, drive: &Drive, t: f64, h: f64, q
     }
 }
 
+/// One explicit evaluation. Arms with beam links (nv ≥ 9) use the O(nv) articulated-body
+/// algorithm (cheaper from nv = 8 on, 2× at nv = 29); the 7-joint arm and PRBM chains keep
+/// CRBA + Cholesky (their bits are fixed by the bit-identity tests).
 #[inline]
 fn stage(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &mut VecN, v: &mut VecN, ws: &mut Workspace) -> VecN {
     let am = prescribe(model, drive, t, q, v);
-    accel_with(model, pd, drive, t, q, v, am, 0.0, &mut ws.m)
+    if model.has_beam() {
+        accel_articulated(model, pd, drive, t, q, v, am)
+    } else {
+        accel_with(model, pd, drive, t, q, v, am, 0.0, &mut ws.m)
+    }
 }
 
 /// Classical RK4.

@@ -1,6 +1,7 @@
 //! Rigid multibody dynamics of the PRBM chain in reduced (joint) coordinates.
 
 pub mod aba;
+pub mod articulated;
 pub mod crba;
 pub mod rnea;
 
