@@ -7,10 +7,12 @@
 //! (to first order) onto the FE nodal coordinates η = (v, w, θy, θz) of nodes 1..n in the
 //! link frame B (x along the link): η = T φ, T from the chain's geometry at φ = 0, square
 //! and invertible. The elastic forces are those of the FE model, `K_φ = Tᵀ K T`,
-//! `C_φ = Tᵀ (μ M + λ K) T`; the bars' kinetic energy is replaced by the consistent one,
-//! `ΔM = Tᵀ M T − M_bars` added to the chain's mass matrix (constant: it acts on the
-//! elastic coordinates only). Downstream bodies (next motor, next link, payload) ride on the
-//! tip node's frame, so the tip masses are the chain's own bodies.
+//! `C_φ = Tᵀ (μ M + λ K) T`. The mass is the chain's own: the chord bars carry the tube's
+//! mass and the section rotary inertia is lumped at the nodes (a rigid-finite-element mass;
+//! the consistent-mass correction `Tᵀ M T − M_bars` made the arm's mass matrix indefinite
+//! and was dropped, docs/beams.md; [`BeamLink::joint_mass`] is kept for comparisons).
+//! Downstream bodies (next motor, next link, payload) ride on the tip node's frame, so the
+//! tip masses are the chain's own bodies.
 
 use super::cantilever::assemble_free;
 use super::element::{element_mass, element_rotary_mass, element_stiffness, Section, NDOF_NODE};
@@ -148,7 +150,8 @@ impl BeamLink {
         Ok(((&kj + kj.transpose()) * 0.5, (&cj + cj.transpose()) * 0.5))
     }
 
-    /// The consistent mass in chain coordinates, `Tᵀ M T` (4n × 4n) [kg·m²].
+    /// The consistent mass in chain coordinates, `Tᵀ M T` (4n × 4n) [kg·m²]; not used by the
+    /// arm's dynamics (see the module docs).
     pub fn joint_mass(&self) -> DMatrix<f64> {
         let m = self.t_map.transpose() * &self.m_nodal * &self.t_map;
         (&m + m.transpose()) * 0.5
