@@ -172,6 +172,23 @@ pub fn prescribe(model: &Model, drive: &Drive, t: f64, q: &mut VecN, v: &mut Vec
     }
 }
 
+/// Add a torque drive's motor torques at `t` to the generalised forces `out` [N·m]: the
+/// drive's torque clamped to `actuator_saturation`, then minus `joint_friction` at the motor
+/// rates `v`.
+#[inline]
+pub fn add_drive_torques(model: &Model, pd: &ParamData, drive: &Drive, t: f64, v: &VecN, out: &mut VecN) {
+    let fx = &pd.params.effects;
+    let tau = drive.torque(t).unwrap_or([0.0; 3]);
+    let fr = fx.joint_friction.on();
+    for (k, &i) in model.motor_idx.iter().enumerate() {
+        let lim = fx.actuator_saturation.tau_max[k];
+        out[i] += if lim.is_finite() { tau[k].clamp(-lim, lim) } else { tau[k] };
+        if fr {
+            out[i] -= crate::effects::friction_torque(&fx.joint_friction, k, v[i]);
+        }
+    }
+}
+
 /// Joint accelerations at time `t` [rad/s²]. `q`, `v` must already be prescribed for
 /// replay (see [`prescribe`]); `h_implicit` is 0 for explicit evaluation.
 #[inline]
@@ -232,17 +249,7 @@ fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q:
         }
     }
     match (drive, am) {
-        (Drive::Torque(_) | Drive::Hold(_), _) => {
-            let tau = drive.torque(t).unwrap_or([0.0; 3]);
-            let fr = fx.joint_friction.on();
-            for (k, &i) in model.motor_idx.iter().enumerate() {
-                let lim = fx.actuator_saturation.tau_max[k];
-                rhs[i] += if lim.is_finite() { tau[k].clamp(-lim, lim) } else { tau[k] };
-                if fr {
-                    rhs[i] -= crate::effects::friction_torque(&fx.joint_friction, k, v[i]);
-                }
-            }
-        }
+        (Drive::Torque(_) | Drive::Hold(_), _) => add_drive_torques(model, pd, drive, t, v, &mut rhs),
         (Drive::Replay(_), Some(am)) => {
             for (k, &p) in model.motor_idx.iter().enumerate() {
                 for f in 0..n {

@@ -21,7 +21,7 @@
 //! Everything lives in fixed arrays of [`NMAX`]; nothing is allocated.
 
 use crate::drive::Drive;
-use crate::forward::passive;
+use crate::forward::{add_drive_torques, passive};
 use crate::math::{Mat3, Vec3, VecN, NMAX};
 use crate::model::{Model, Rbi};
 use crate::params::ParamData;
@@ -295,15 +295,7 @@ pub fn accel_articulated_locked(model: &Model, pd: &ParamData, drive: &Drive, t:
     let mut pres = [(usize::MAX, 0.0); 3];
     let np = match (drive, am) {
         (Drive::Torque(_) | Drive::Hold(_), _) => {
-            let tm = drive.torque(t).unwrap_or([0.0; 3]);
-            let fr = fx.joint_friction.on();
-            for (k, &i) in model.motor_idx.iter().enumerate() {
-                let lim = fx.actuator_saturation.tau_max[k];
-                tau[i] += if lim.is_finite() { tm[k].clamp(-lim, lim) } else { tm[k] };
-                if fr {
-                    tau[i] -= crate::effects::friction_torque(&fx.joint_friction, k, v[i]);
-                }
-            }
+            add_drive_torques(model, pd, drive, t, v, &mut tau);
             0
         }
         (Drive::Replay(_), Some(am)) => {
