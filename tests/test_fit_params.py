@@ -64,6 +64,7 @@ def test_beam_e_and_damping_are_recovered(run):
         (["joint_friction.b[5]"], {}, "out of range"),
         (["joint_friction.b[0]"], {"x0": {"joint_friction.b[0]": 500.0}}, "outside its bounds"),
         (["joint_friction.b[0]"], {"bounds": {"joint_friction.tau_c": (0, 1)}}, "not among the fitted"),
+        (["joint_friction.b[0]"], {"x0": {"joint_friction.b[2]": 0.1}}, "not among the fitted"),
         (["joint_friction.b[0]"], {"bounds": {"joint_friction.b": (1.0, 0.5)}}, "lower < upper"),
         (["joint_friction.b", "joint_friction.b[1]"], {}, "named twice"),
         ("joint_friction", {}, "not 'effect.name'"),

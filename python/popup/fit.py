@@ -213,8 +213,8 @@ def fit_params(
     entries = _parse(params)
     for what, d in (("bounds", bounds), ("scale", scale), ("x0", x0), ("grid", grid)):
         for k in d or {}:
-            base = k.rsplit("[", 1)[0]
-            if not any(key == k or key.rsplit("[", 1)[0] == base for _, _, key in entries):
+            # "effect.name[i]" must be a fitted entry; "effect.name" any fitted entry of it
+            if not any(key == k or ("[" not in k and key.rsplit("[", 1)[0] == k) for _, _, key in entries):
                 raise InputError(f"input {what}: {k!r} is not among the fitted parameters {[key for _, _, key in entries]}")
     flat = np.asarray(model.effects_flat, dtype=float).copy()
     free: List[Tuple[fx.EffectParam, int]] = []
