@@ -48,7 +48,14 @@ residual ``e = y − ŷ`` (measured − simulated):
   never the measured outputs), not a one-step-ahead prediction error, so it is much
   stricter than the fit % of a one-step predictor;
 * ``max_abs_error`` and ``t_max_error`` [s];
-* ``nrmse = rmse / std(y)`` (dimensionless).
+* ``nrmse = rmse / std(y)`` (dimensionless);
+* ``noise_multiple = rmse / σ`` with σ the channel's white-noise floor estimated from
+  the data (:mod:`popup.noise`): 1 = the model is at the noise floor on this channel.
+  The overall ``error`` is the systematic error in noise units that the diagnosis
+  fits and ranks by (:data:`popup.problem.ERROR_DEFINITION`).
+
+The replay set-up (channels, output rate, the smoothed encoder, the noise floor) is a
+:class:`popup.ReplayProblem`, shared with the diagnosis and the fits.
 
 Overall: ``fit_pct`` is the mean of the per-channel fit %, ``nrmse`` the mean of the
 per-channel ``rmse/std(y)``.
@@ -102,7 +109,8 @@ import numpy as np
 
 from .exceptions import InputError, MeasuredRunError
 from .io import MeasuredRun
-from .results import CHANNELS, UNITS, SimResult
+from .problem import DEFAULT_CHANNELS, ReplayProblem, Shifted
+from .results import UNITS, SimResult
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
@@ -111,25 +119,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["Comparison", "compare", "DEFAULT_CHANNELS"]
 
-DEFAULT_CHANNELS: Tuple[str, ...] = (
-    "tau1",
-    "tau2",
-    "tau3",
-    "ee_x",
-    "ee_y",
-    "ee_z",
-    "imu1_ax",
-    "imu1_ay",
-    "imu1_az",
-    "imu2_ax",
-    "imu2_ay",
-    "imu2_az",
-)
-"""The channels compared by default in an encoder replay (when the run has them)."""
-
-_INPUTS_ENCODER = ("q1", "q2", "q3")
-_DERIVED = ("dq1", "dq2", "dq3")
-_PRESSURES = ("p1", "p2")
 _Z99 = 2.58
 _MOMENT_EDGES = (0.5, 0.8, 1.0)
 _MOMENT_LABELS = ("0-0.5", "0.5-0.8", "0.8-1", ">1")
@@ -163,10 +152,14 @@ class Comparison:
     metrics : DataFrame
         One row per compared channel (index ``channel``): ``rmse`` [channel unit],
         ``nrmse_fit_pct`` [%], ``max_abs_error`` [unit], ``t_max_error`` [s], ``unit``,
-        ``nrmse`` (rmse / measured std), ``n_samples``.
+        ``nrmse`` (rmse / measured std), ``n_samples``, ``noise_std`` (the channel's
+        white-noise floor σ, :mod:`popup.noise`), ``noise_multiple`` (rmse/σ: 1 = at the
+        noise floor), ``at_noise_floor`` (the measured signal itself is at its noise floor).
     overall : dict
         ``fit_pct`` (mean of the per-channel fit %), ``nrmse`` (mean of rmse/std),
-        ``n_channels``, ``n_samples``, ``worst_channel``, ``white_fraction``.
+        ``n_channels``, ``n_samples``, ``worst_channel``, ``white_fraction``, ``error``
+        (the systematic error in noise units, :data:`popup.problem.ERROR_DEFINITION`),
+        ``noise_multiple`` (RMS over channels of rmse/σ), ``at_noise_floor``.
     residuals : DataFrame
         Measured − simulated, indexed by the measured ``t`` [s], one column per channel
         (NaN where a side is missing).
@@ -343,6 +336,7 @@ def compare(
     sample_rate: Optional[float] = None,
     lags: int = 25,
     n_windows: int = 10,
+    problem: Optional["ReplayProblem"] = None,
 ) -> Comparison:
     """Replay ``run`` in ``model`` and compare (see the module docs).
 
@@ -364,6 +358,9 @@ def compare(
         Largest lag L [samples] of the auto- and cross-correlations (default 25).
     n_windows : int
         Number of equal time windows (default 10).
+    problem : ReplayProblem, optional
+        The run already set up in this model (:class:`popup.ReplayProblem`: channels,
+        rate, smoothed encoder, nominal replay, noise floor); built here when not given.
 
     Raises
     ------
@@ -376,14 +373,14 @@ def compare(
     if int(lags) < 1 or int(n_windows) < 1:
         raise InputError(f"compare: lags ({lags}) and n_windows ({n_windows}) must be ≥ 1")
     L = int(lags)
-    notes: List[str] = []
-    where = str(run.data_file if run.data_file is not None else run.source)
-    if run.replay not in ("encoder", "reference"):
-        raise MeasuredRunError(f"{where}: unknown replay mode {run.replay!r}; expected \"encoder\" or \"reference\"")
-    closed = run.replay == "reference"
-
-    # ---- channels
-    chans = _select_channels(run, channels, where, notes, closed)
+    if problem is None:
+        problem = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate)
+    elif problem.run is not run or problem.model is not model:
+        raise InputError("compare: problem= must be a ReplayProblem of this model and run")
+    notes: List[str] = list(problem.notes)
+    where = problem.where
+    closed = problem.closed
+    chans = list(problem.channels)
 
     # ---- declared experiment vs model
     if abs(float(model.payload_kg) - float(run.payload_kg)) > 0.0 or tuple(model.pressure_pa) != tuple(run.pressure_pa):
@@ -395,38 +392,17 @@ def compare(
     if model_gravity != bool(run.gravity):
         notes.append(f"the model has gravity {'on' if model_gravity else 'off'} but the run declares gravity = {str(run.gravity).lower()}")
 
-    # ---- replay
+    # ---- replay (the problem's nominal replay)
     t_meas = run.time
-    t_enc, q_enc = run.reference() if closed else run.encoder()
-    n_skip_enc = len(t_meas) - len(t_enc)
-    if n_skip_enc:
-        what = "reference" if closed else "encoder"
-        notes.append(f"{what} replay: {n_skip_enc} row(s) with a missing {'ref_q' if closed else 'q'}1..3 skipped (interpolated over)")
-    span = float(t_enc[-1] - t_enc[0])
-    mean_dt = span / (len(t_enc) - 1)
-    dt = model.dt
-    if sample_rate is None:
-        k = max(1, int(math.floor(mean_dt / dt * (1.0 + 1e-9))))
-        sr = 1.0 / (k * dt)
-        if mean_dt < dt * (1.0 - 1e-9):
-            notes.append(f"the run ({1.0 / mean_dt:.6g} Hz) is sampled faster than the model step allows; simulated at 1/dt = {sr:.6g} Hz")
-        else:
-            notes.append(f"simulated at {sr:.6g} Hz (output every {k} step(s) of dt = {dt:g} s; the run's mean rate is {1.0 / mean_dt:.6g} Hz)")
-    else:
-        sr = float(sample_rate)
-        notes.append(f"simulated at {sr:.6g} Hz (sample_rate given; the run's mean rate is {1.0 / mean_dt:.6g} Hz)")
-    sim: Any
+    t_enc, q_enc = problem.t_enc, problem.q_enc_raw
+    mean_dt = float(t_enc[-1] - t_enc[0]) / (len(t_enc) - 1)
+    sr = problem.sample_rate
+    sim: Any = problem.nominal_result()
     if closed:
-        task, q0, t0, dur = reference_setup(run)
         notes.append(
-            f"closed-loop replay: the controller of the run's [controller] table tracks ref_q1..3 from rest at q = {np.round(q0, 6).tolist()} rad; "
+            f"closed-loop replay: the controller of the run's [controller] table tracks ref_q1..3 from rest at q = {np.round(problem.q0, 6).tolist()} rad; "
             "the encoder angles are predicted, not replayed"
         )
-        sim = model.run_task(task, duration=dur, q0=q0.tolist(), sample_rate=sr)
-        sim = _Shifted(sim, t0)
-    else:
-        iq, iv = _initial_state(model, run, q_enc[0], notes)
-        sim = model.replay(t_enc, q_enc, sample_rate=sr, initial_q=iq, initial_v=iv)
 
     # ---- align: simulation interpolated linearly onto the measured stamps
     t_sim = sim.time
@@ -477,6 +453,10 @@ def compare(
                          nrmse=(rmse / std if std > 0 else (0.0 if rmse == 0 else math.inf)),
                          std_measured=std, n_samples=n))
     metrics = pd.DataFrame(rows).set_index("channel")
+    sigma = problem.noise
+    metrics["noise_std"] = [sigma[c] for c in chans]
+    metrics["noise_multiple"] = metrics["rmse"] / metrics["noise_std"]
+    metrics["at_noise_floor"] = [c in problem.at_floor for c in chans]
     valid = [c for c in chans if metrics.loc[c, "n_samples"] > 0]
     if not valid:
         raise MeasuredRunError(f"{where}: no sample where both the run and the simulation have {chans}")
@@ -627,6 +607,9 @@ def compare(
         "sample_rate_hz": sr,
         "measured_rate_hz": fs,
         "worst_window": [float(windows.loc[order[0], "t_start"]), float(windows.loc[order[0], "t_end"])],
+        "error": problem.error()[0],
+        "noise_multiple": float(np.sqrt(np.mean(np.square(metrics.loc[valid, "noise_multiple"].to_numpy(dtype=float))))),
+        "at_noise_floor": list(problem.at_floor),
     }
     notes.append(f"compared {len(valid)} channel(s): {', '.join(valid)}")
     return Comparison(
@@ -651,128 +634,6 @@ def compare(
 
 
 # ---------------------------------------------------------------------------- helpers
-
-
-class _Shifted:
-    """A closed-loop result (time from 0) seen on the run's clock (time from ``t0``)."""
-
-    def __init__(self, res: Any, t0: float) -> None:
-        self.res = res
-        self.t0 = float(t0)
-
-    @property
-    def time(self) -> np.ndarray:
-        return self.res.time + self.t0
-
-    def channel(self, name: str) -> np.ndarray:
-        return self.time if name == "t" else self.res.channel(name)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.res, name)
-
-
-def reference_setup(run: MeasuredRun) -> Tuple[Any, np.ndarray, float, float]:
-    """The closed-loop replay of a ``replay = "reference"`` run: ``(task, q0 [rad], t0 [s],
-    duration [s])``. The task is one phase tracking the measured references (linear
-    interpolation) with the controller of the run's ``[controller]`` table; the run starts at
-    rest at the first encoder sample (the first reference sample when q1..q3 are absent)."""
-    from .control import Controller, Phase, Task, samples
-
-    t_ref, q_ref = run.reference()
-    where = str(run.source)
-    ctl = dict(run.controller or {})
-    try:
-        controller = Controller(**ctl)
-    except TypeError as e:
-        raise MeasuredRunError(f"{where}: [controller] table: {e} (keys: rate_hz, gains, motor, motors, damping, damping_lpf_rad_s, v_max, anti_windup)") from None
-    t0 = float(t_ref[0])
-    task = Task([Phase("moving", name="Replay", track=[samples(t_ref - t0, q_ref[:, j]) for j in range(3)], until={"max_time": math.inf})], controller, faults={"wrinkle": "continue"})
-    q0 = q_ref[0]
-    if all(c in run.columns for c in ("q1", "q2", "q3")):
-        q = np.column_stack([run.channel(c) for c in ("q1", "q2", "q3")])
-        ok = np.all(np.isfinite(q), axis=1)
-        if ok.any():
-            q0 = q[int(np.argmax(ok))]
-    return task, np.asarray(q0, dtype=np.float64), t0, float(t_ref[-1] - t0)
-
-
-def _select_channels(run: MeasuredRun, channels: Optional[Sequence[str]], where: str, notes: List[str], closed: bool = False) -> List[str]:
-    have = [c for c in run.columns if c in CHANNELS and c != "t"]
-    if channels is not None:
-        chans = [str(c) for c in channels]
-        bad = [c for c in chans if c not in have]
-        if bad:
-            raise MeasuredRunError(
-                f"{where}: cannot compare {bad}: a channel must be both measured and simulated; "
-                f"comparable channels of this run: {have or 'none'} (run columns: {run.columns})"
-            )
-        if not chans:
-            raise MeasuredRunError(f"{where}: channels=[] selects nothing to compare; comparable: {have}")
-        for c in chans:
-            if closed:
-                continue
-            if c in _INPUTS_ENCODER:
-                notes.append(f"{c} is an input of the encoder replay: it matches by construction (up to the spline)")
-            if c in _DERIVED:
-                notes.append(f"{c}: the simulated rate is the derivative of the encoder spline, not an independent prediction")
-        return chans
-    chans = []
-    skipped = []
-    for c in have:
-        if not closed and (c in _INPUTS_ENCODER or c in _DERIVED):
-            skipped.append(c)
-            continue
-        y = run.channel(c)
-        if not np.any(np.isfinite(y)):
-            notes.append(f"{c}: every measured sample is missing; not compared")
-            continue
-        if c in _PRESSURES:
-            yy = y[np.isfinite(y)]
-            if yy.size < 2 or float(np.max(yy) - np.min(yy)) == 0.0:
-                skipped.append(c)
-                continue
-            notes.append(f"{c}: the measured pressure varies, so it is compared (the model holds it constant)")
-        chans.append(c)
-    if skipped:
-        notes.append(f"not compared by default: {', '.join(skipped)} (replay inputs, spline derivatives or constant pressures)")
-    if not chans:
-        raise MeasuredRunError(
-            f"{where}: nothing to compare: the run has no measured output the model predicts "
-            f"(run columns: {', '.join(run.columns)}; comparable outputs are {', '.join(DEFAULT_CHANNELS)}"
-            f", and p1/p2 when they vary)"
-        )
-    return chans
-
-
-def _initial_state(model: "Model", run: MeasuredRun, q0: np.ndarray, notes: List[str]) -> Tuple[Any, Any]:
-    ini = run.initial
-    if not ini:
-        notes.append("the run starts at rest: bending joints in static equilibrium at the first encoder sample")
-        return None, None
-    names = ["d11", "d12", "d21", "d22"]
-    rates = ["dd11", "dd12", "dd21", "dd22"]
-    d = ini.get("bending")
-    dd = ini.get("bending_rate")
-    if d is None and any(n in ini for n in names):
-        d = [float(ini.get(n, math.nan)) for n in names]
-    if dd is None and any(n in ini for n in rates):
-        dd = [float(ini.get(n, 0.0)) for n in rates]
-    jn = model.joint_names
-    if d is None or len(d) != 4 or not all(n in jn for n in names):
-        notes.append(f"[initial] table {sorted(ini)} not understood (expected d11 d12 d21 d22 [rad] and dd11.. [rad/s]); the run starts at rest")
-        return None, None
-    q = model.rest_state([float(x) for x in q0])
-    v = np.zeros(len(jn))
-    locked = set(model.core.locked_index)
-    for n, x in zip(names, d):
-        if np.isfinite(float(x)) and jn.index(n) not in locked:
-            q[jn.index(n)] = float(x)
-    if dd is not None:
-        for n, x in zip(rates, dd):
-            if jn.index(n) not in locked:
-                v[jn.index(n)] = float(x)
-    notes.append("initial bending angles and rates from the run's [initial] table" + (" (a rigid link's stay 0)" if locked else ""))
-    return q, v
 
 
 def _inputs(run: MeasuredRun, t_enc: np.ndarray, q_enc: np.ndarray, t_meas: np.ndarray) -> Tuple[Dict[str, np.ndarray], str]:

@@ -2,40 +2,53 @@
 
 ::
 
-    run = popup.read_run("examples/data/friction_run")
+    run = popup.read_run("examples/data/lab_run")
     model = run.model()
-    d = popup.diagnose(model, run)          # every effect ranked
+    d = popup.diagnose(model, run)          # every effect fitted, validated, ranked
     d.to_pandas()                           # score, significant, error after, parameters
     better = d.best.apply(model)            # model.with_effect(...) with the fitted values
     h = popup.improve(model, run)           # the loop: add, refit, until nothing is left
-    h.plot(); h.to_dict()
+    h.plot(); h.to_dict(); h.conclusion
 
-How a suspect is scored
------------------------
-**Error.** The free-run error of an encoder replay (the model sees only the encoder
-angles, never the measured outputs), per channel ``NRMSE = RMSE / std(measured)``
-(as :func:`popup.compare.compare` reports it), and overall the root mean square over
-the compared channels (:data:`ERROR_DEFINITION`), so that the least-squares objective
-and the reported error are the same quantity (``RSS = n·C·error²``).
+One problem, one objective
+--------------------------
+The run is set up once as a :class:`popup.ReplayProblem` (channels, output rate, the
+smoothed encoder, the nominal replay, each channel's noise floor σ_c, training and
+held-out samples) and shared by :func:`popup.compare.compare`, :func:`diagnose`,
+:func:`improve` and :func:`popup.fit_params`.
 
-**Fit.** For each effect, its parameters marked ``fit`` in the registry
-(:mod:`popup.effects`) are fitted by bounded nonlinear least squares
-(``scipy.optimize.least_squares``, trust-region reflective) on the normalised residuals
-``(ŷ − y)/std(y)`` of every compared channel and sample. The Jacobian is by forward
-differences, all columns in one batched rollout (Rust, GIL released, all cores).
+**Error** (:data:`ERROR_DEFINITION`): the systematic part of the free-run replay error in
+units of the noise, ``S = sqrt(max(mean_c r_c² − 1, 0))`` with ``r_c = RMSE_c/σ_c`` each
+channel's *noise multiple* (1 = at its noise floor). A channel that carries only noise
+(a pressure held constant) sits at ``r_c ≈ 1`` whatever the model does and adds nothing.
 
-**Significance.** Residuals of a free-run simulation are strongly autocorrelated, so
-the ``n`` samples are not ``n`` independent observations. The effective count is
-``n_eff = Σ_c n_c (1 − ρ_c)/(1 + ρ_c)`` with ``ρ_c`` the lag-1 autocorrelation of channel
-c's residual after the fit (the AR(1) variance-inflation factor). The score is the BIC
-improvement ``n_eff ln(RSS₀/RSS₁) − k ln(n_eff)`` (k fitted parameters); an effect is
-*significant* when the score is above :data:`SCORE_THRESHOLD` and the overall error
-drops by at least :data:`MIN_RELATIVE_DROP`. A model with nothing missing leaves white
-noise, every candidate only fits noise, and none passes.
+**Fit.** Each effect's parameters (registry ``fit`` flags, :mod:`popup.effects`) are
+fitted by Gaussian maximum likelihood with an unknown variance per channel on the
+training samples, from the best of the effect's seed points (:mod:`popup.estimate`).
 
-**Confidence intervals.** 95 %, from the Gauss–Newton covariance at the optimum
-``s² (JᵀJ)⁻¹`` with ``s² = RSS/(n − k)``, inflated by ``n/n_eff`` for the residual
-correlation.
+**Every effect is tried.** An effect that changes the chain (``higher_bending_modes``,
+``torsion``) may need a smaller step than the model's: the step is chosen per candidate
+from the linearised stability limit of that candidate's structure
+(:meth:`Model.stable_dt`) with the margin :data:`STABILITY_MARGIN`, as a divisor of the
+output period, and the nominal model is re-run at the same step so that both are compared
+at the same accuracy. An effect that still cannot be tried is listed with
+``tested = False`` and its reason, and the conclusion says the ranking is incomplete.
+
+**Significance.** ``score = LR − k ln n_eff`` (BIC) with the likelihood ratio
+``LR = Σ_c n_eff,c ln(mean z²_c,before / mean z²_c,after)`` on the training samples and
+``n_eff,c = n_c (1 − ρ_c)/(1 + ρ_c)`` (ρ_c the lag-1 autocorrelation of the fitted
+residual). An effect is *significant* when the score exceeds :data:`SCORE_THRESHOLD`, it
+explains at least :data:`MIN_EXPLAINED` of the systematic error (``1 − S²_after/S²_before``)
+and it is confirmed on the held-out samples (the likelihood ratio there is positive and the
+held-out error falls).
+
+**Refinement.** A significant effect is also fitted in its richer variants
+(:data:`VARIANTS`: friction with Stribeck terms, three segments for bending, a centre-of-mass
+offset for the payload); the variant with the better score is kept.
+
+**Identifiability.** Each fit's scaled Fisher matrix is checked (rank, condition,
+correlations, bounds); parameters the run cannot pin down get an infinite interval and are
+named (``Suspect.identifiability``).
 
 **Evidence.** Each suspect carries the residual signature of ``effects.md`` measured on
 the nominal residual (e.g. the regression of the torque residual on sign(q̇) and q̇ for
@@ -46,16 +59,19 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from . import effects as fx
+from . import estimate as est
 from .compare import Comparison, compare
-from .exceptions import InputError, MeasuredRunError
+from .exceptions import InputError
 from .io import MeasuredRun
+from .problem import ERROR_DEFINITION, ReplayProblem
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
@@ -72,68 +88,45 @@ __all__ = [
     "model_error",
     "ERROR_DEFINITION",
     "SCORE_THRESHOLD",
-    "MIN_RELATIVE_DROP",
+    "MIN_EXPLAINED",
+    "STABILITY_MARGIN",
+    "AT_FLOOR",
+    "VARIANTS",
 ]
 
-ERROR_DEFINITION = (
-    "root mean square over the compared channels of NRMSE = RMSE/std(measured), the free-run error of the "
-    "encoder replay (the model sees only the encoder angles, never the measured outputs): sqrt(mean_c NRMSE_c^2)"
-)
-_NUDGE = 0.2
-_METHOD = "trf"
 SCORE_THRESHOLD = 10.0
 """BIC improvement (with the effective sample count) above which an effect is significant."""
-MIN_RELATIVE_DROP = 0.05
-"""Smallest relative drop of the overall error for an effect to be significant."""
-
-#: Typical magnitude of each fitted parameter (finite-difference steps and x_scale).
-_SCALE: Dict[Tuple[str, str], float] = {
-    ("joint_friction", "tau_c"): 1.0,
-    ("joint_friction", "b"): 0.5,
-    ("joint_friction", "tau_s"): 1.0,
-    ("joint_friction", "v_s"): 0.05,
-    ("backlash", "gap"): 0.01,
-    ("higher_bending_modes", "k_scale"): 0.5,
-    ("higher_bending_modes", "e_pa"): 1e8,
-    ("higher_bending_modes", "lambda_s"): 1e-4,
-    ("pressure_leak", "rate"): 0.01,
-    ("wrinkling", "ratio"): 0.3,
-    ("wrinkling", "mw_scale"): 0.3,
-    ("payload_mass", "delta_kg"): 0.3,
-    ("payload_mass", "com_offset_m"): 0.02,
-    ("sensor_delay", "imu"): 0.005,
-    ("sensor_delay", "encoder"): 0.005,
-    ("sensor_delay", "torque"): 0.005,
-    ("sensor_delay", "mocap"): 0.005,
-    ("actuator_saturation", "tau_max"): 2.0,
-    ("air_drag", "cd"): 1.0,
-    ("torsion", "k_t"): 100.0,
-    ("torsion", "c_t"): 0.5,
-}
-
-#: Candidate starting points tried in one batched rollout before the least-squares fit
-#: (the effects are non-convex in their parameters: thresholds, dead zones, delays); a
-#: value applies to every joint/link entry of the parameter.
-_SEEDS: Dict[str, List[Dict[str, float]]] = {
-    "joint_friction": [{"tau_c": 0.5, "b": 0.1}, {"tau_c": 2.0, "b": 0.5}],
-    "backlash": [{"gap": 0.005}, {"gap": 0.02}, {"gap": 0.05}],
-    "pressure_leak": [{"rate": 0.005}, {"rate": 0.05}],
-    "wrinkling": [{"ratio": r, "mw_scale": m} for r in (0.3, 0.6) for m in (0.4, 0.7, 1.0)],
-    "payload_mass": [{"delta_kg": -0.5}, {"delta_kg": 0.5}],
-    "sensor_delay": [{"imu": d, "torque": d, "mocap": d} for d in (0.005, 0.02, 0.05)],
-    "air_drag": [{"cd": 1.0}, {"cd": 5.0}, {"cd": 20.0}],
-    "higher_bending_modes": [{"k_scale": 0.5}, {"k_scale": 2.0}],
-    "torsion": [{"k_t": 30.0, "c_t": 0.1}, {"k_t": 300.0, "c_t": 0.5}],
-}
+MIN_EXPLAINED = 0.1
+"""Smallest share of the systematic error (``1 − S²_after/S²_before``) a significant effect explains."""
+STABILITY_MARGIN = 0.5
+"""A candidate runs with a step at most this fraction of its linearised stability limit."""
+AT_FLOOR = 0.3
+"""Systematic error [noise units] below which a model is said to be at the noise floor
+(the total error within 5 % of the noise: sqrt(1 + 0.3²) = 1.044)."""
 
 #: Effects whose fit needs more iterations than ``max_iter`` (coupled, lightly damped modes).
 _MIN_ITER: Dict[str, int] = {"torsion": 40, "higher_bending_modes": 25, "wrinkling": 20}
 
-#: Structural settings used when an effect is tried (its discrete parameters).
+#: Structural settings used when an effect is tried (its discrete parameters), and the
+#: parameter values at which its stability limit is taken (the stiffest seed).
 _STRUCTURE: Dict[str, Dict[str, Any]] = {
     "higher_bending_modes": {"segments": [2.0, 2.0]},
     "torsion": {"k_t": [200.0, 200.0]},
 }
+_STIFFEST: Dict[str, Dict[str, Any]] = {
+    "higher_bending_modes": {"k_scale": [2.0, 2.0]},
+    "torsion": {"k_t": [400.0, 400.0], "c_t": [0.5, 0.5]},
+}
+
+VARIANTS: Dict[str, List[Dict[str, Any]]] = {
+    "joint_friction": [{"name": "Stribeck", "extra": ["tau_s", "v_s"], "seeds": [{"tau_s": 0.5, "v_s": 0.05}, {"tau_s": 1.5, "v_s": 0.1}, {"tau_s": 1.0, "v_s": 0.02}]}],
+    "higher_bending_modes": [{"name": "3 segments", "structure": {"segments": [3.0, 3.0]}}],
+    "payload_mass": [{"name": "centre-of-mass offset", "extra": ["com_offset_m"]}],
+}
+"""Richer variants tried when an effect is significant: ``extra`` parameters fitted with
+the base ones (from the base fit), or another ``structure``."""
+
+Progress = Callable[[Dict[str, Any]], None]
 
 
 def _pd() -> Any:
@@ -142,113 +135,12 @@ def _pd() -> Any:
     return pd
 
 
-# ---------------------------------------------------------------------------- problem
-
-
-class _Problem:
-    """One measured run replayed in one compiled model: the normalised residual vector of
-    any batch of effect vectors."""
-
-    def __init__(self, model: "Model", run: MeasuredRun, channels: Sequence[str], sample_rate: float, threads: int) -> None:
-        self.model = model
-        self.run = run
-        self.channels = list(channels)
-        self.sample_rate = float(sample_rate)
-        self.threads = int(threads)
-        self.t_meas = run.time
-        notes: List[str] = []
-        from .compare import _initial_state, reference_setup
-
-        self.closed = run.replay == "reference"
-        if self.closed:
-            # the references stand in for the encoder angles in the evidence statistics
-            self.t_enc, self.q_enc = run.reference()
-            self.task, self.q0, self.t0, self.duration = reference_setup(run)
-        else:
-            self.t_enc, self.q_enc = run.encoder()
-            self.iq, self.iv = _initial_state(model, run, self.q_enc[0], notes)
-        Y = np.column_stack([run.channel(c) for c in self.channels])
-        self.std = np.array([float(np.nanstd(Y[:, j])) or 1.0 for j in range(Y.shape[1])])
-        self.Y = Y
-        self.nfev = 0
-
-    def simulate(self, flats: np.ndarray, model: Optional["Model"] = None) -> np.ndarray:
-        """Simulated channels on the measured stamps, (B, n, C)."""
-        m = self.model if model is None else model
-        flats = np.atleast_2d(flats)
-        res: Any
-        if self.closed:
-            res = m.rollout_task(
-                self.task,
-                duration=self.duration,
-                q0=self.q0,
-                sample_rate=self.sample_rate,
-                threads=self.threads,
-                effects=flats,
-                raise_on_error=False,
-            )
-            ok = np.array([e is None and st == "completed" for e, st in zip(res.errors, res.status)])
-            t0 = self.t0
-        else:
-            res = m.rollout(
-                encoder_t=self.t_enc,
-                encoder_q=self.q_enc,
-                initial_q=self.iq,
-                initial_v=self.iv,
-                sample_rate=self.sample_rate,
-                threads=self.threads,
-                effects=flats,
-                raise_on_error=False,
-            )
-            ok = np.asarray(res.ok)
-            t0 = 0.0
-        self.nfev += flats.shape[0]
-        if not ok.any():
-            return np.full((flats.shape[0], len(self.t_meas), len(self.channels)), np.nan)
-        t_sim = res.time[int(np.argmax(ok))] + t0
-        out = np.full((flats.shape[0], len(self.t_meas), len(self.channels)), np.nan)
-        same = len(t_sim) == len(self.t_meas) and np.array_equal(t_sim, self.t_meas)
-        inside = (self.t_meas >= t_sim[0] - 1e-12) & (self.t_meas <= t_sim[-1] + 1e-12)
-        for j, c in enumerate(self.channels):
-            y = res.channel(c)
-            for b in range(flats.shape[0]):
-                if same:
-                    out[b, :, j] = y[b]
-                else:
-                    out[b, inside, j] = np.interp(self.t_meas[inside], t_sim, y[b])
-        return out
-
-    def residuals(self, sims: np.ndarray) -> np.ndarray:
-        """Normalised residuals (ŷ − y)/std, (B, n, C); missing cells 0; failed runs inf."""
-        r = (sims - self.Y[None]) / self.std[None, None, :]
-        bad_run = ~np.isfinite(sims).any(axis=(1, 2))
-        r = np.where(np.isfinite(r), r, 0.0)
-        r[bad_run] = np.inf
-        return r
-
-    def error(self, r: np.ndarray) -> Tuple[float, Dict[str, float]]:
-        """Overall error (RMS over channels of NRMSE) and per channel, from one residual array (n, C)."""
-        ok = np.isfinite(self.Y)
-        per = {}
-        for j, c in enumerate(self.channels):
-            n = max(int(ok[:, j].sum()), 1)
-            per[c] = float(np.sqrt(np.sum(r[:, j] ** 2) / n))
-        return float(np.sqrt(np.mean(np.square(list(per.values()))))), per
-
-    def n_eff(self, r: np.ndarray) -> float:
-        ok = np.isfinite(self.Y)
-        total = 0.0
-        for j in range(r.shape[1]):
-            x = r[ok[:, j], j]
-            n = len(x)
-            if n < 3:
-                continue
-            x = x - x.mean()
-            d = float(np.dot(x, x))
-            rho = float(np.dot(x[1:], x[:-1]) / d) if d > 0 else 0.0
-            rho = min(max(rho, 0.0), 0.999)
-            total += n * (1.0 - rho) / (1.0 + rho)
-        return max(total, 1.0)
+def _num(x: Any) -> Optional[float]:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
 
 
 # ---------------------------------------------------------------------------- results
@@ -263,29 +155,38 @@ class Suspect:
     effect : str
         Effect name (``effects.md``).
     significant : bool
-        Passes the significance test (module docs).
+        Passes the significance test and the held-out confirmation (module docs).
     score : float
-        BIC improvement with the effective sample count (higher = more error explained
-        beyond the complexity penalty; negative = not worth its parameters).
+        BIC improvement with the effective sample count on the training samples (higher =
+        more explained beyond the complexity penalty); ``-inf`` when not tested.
     params : dict
         Fitted parameters ``{name: [values]}`` (structural ones included), units in
         ``popup.effects.EFFECTS[effect].params``.
     ci95 : dict
-        95 % confidence half-widths, same keys as the fitted parameters.
+        95 % half-widths of the fitted parameters (``inf``: not identifiable from this run).
     error_before, error_after : float
-        Overall error (``ERROR_DEFINITION``) without and with the fitted effect: the
-        predicted error after adding it.
+        Systematic error (``ERROR_DEFINITION``) without and with the fitted effect, on the
+        whole run, at this candidate's step.
     channel_error_after : dict
-        Per-channel NRMSE with the effect.
+        Noise multiple ``r_c`` of each channel with the effect.
     evidence : dict
-        The residual signature: ``signature`` (what to look for), ``statistic``,
-        ``value`` and ``text``.
-    n_eff : float
-        Effective number of independent residual samples used in the score.
-    n_rollouts : int
-        Simulations this effect's seeds and fit used.
+        The residual signature: ``signature``, ``statistic``, ``value``, ``text``.
+    tested : bool
+        False when the effect could not be tried (``message`` says why).
     message : str
-        Why the effect could not be tried, if it could not ("" otherwise).
+        Why it could not be tried, or notes (the step it ran at).
+    explained : float
+        Share of the systematic error it explains, ``1 − S²_after/S²_before``.
+    validation_before, validation_after : float
+        Systematic error on the held-out samples without and with the effect.
+    validation_lr : float
+        Likelihood ratio on the held-out samples (> 0: the effect helps there too).
+    variant : str
+        The richer variant kept ("" = the base effect).
+    identifiability : dict
+        ``rank``, ``condition``, ``correlated``, ``at_bound``, ``unidentifiable``, ``text``.
+    dt : float
+        The step [s] the candidate ran at.
     """
 
     effect: str
@@ -300,62 +201,98 @@ class Suspect:
     n_eff: float = 0.0
     n_rollouts: int = 0
     message: str = ""
+    tested: bool = True
+    explained: float = 0.0
+    validation_before: float = math.nan
+    validation_after: float = math.nan
+    validation_lr: float = math.nan
+    variant: str = ""
+    identifiability: Dict[str, Any] = field(default_factory=dict)
+    dt: float = math.nan
+    fitted: List[str] = field(default_factory=list)
 
     @property
     def relative_drop(self) -> float:
         """1 − error_after/error_before."""
-        return 1.0 - self.error_after / self.error_before if self.error_before > 0 else 0.0
+        if not (self.tested and self.error_before > 0 and math.isfinite(self.error_after)):
+            return 0.0
+        return 1.0 - self.error_after / self.error_before
 
     def params_text(self) -> str:
         """The fitted parameters with their 95 % half-widths, e.g. ``delta_kg=0.3006±0.00039``."""
         return _fmt_params({k: v for k, v in self.params.items() if k in self.ci95}, self.ci95)
 
     def apply(self, model: "Model") -> "Model":
-        """``model`` with this effect switched on at its fitted values."""
-        return model.with_effect(self.effect, **self.params)
+        """``model`` with this effect switched on at its fitted values (and the smaller
+        step the candidate needed, if it did)."""
+        m = model.with_effect(self.effect, **self.params)
+        if math.isfinite(self.dt) and self.dt < m.dt * (1 - 1e-12):
+            m = m.with_dt(self.dt)
+        return m
 
     def to_dict(self) -> Dict[str, Any]:
         """JSON-ready numbers (the ``suspects`` entries of the CLI's ``--json``)."""
         return {
             "effect": self.effect,
+            "tested": bool(self.tested),
             "significant": bool(self.significant),
             "score": _num(self.score),
+            "variant": self.variant,
             "params": {k: [_num(x) for x in v] for k, v in self.params.items()},
             "ci95": {k: [_num(x) for x in v] for k, v in self.ci95.items()},
+            "error_before": _num(self.error_before),
             "error_after": _num(self.error_after),
             "relative_drop": _num(self.relative_drop),
+            "explained_share": _num(self.explained),
+            "channel_error_after": {k: _num(v) for k, v in self.channel_error_after.items()},
+            "validation": {"error_before": _num(self.validation_before), "error_after": _num(self.validation_after), "lr": _num(self.validation_lr)},
+            "identifiability": _jsonable(self.identifiability),
             "evidence": {k: (_num(v) if isinstance(v, float) else v) for k, v in self.evidence.items()},
             "n_eff": _num(self.n_eff),
+            "dt": _num(self.dt),
             "message": self.message,
         }
 
 
-def _num(x: Any) -> Optional[float]:
-    x = float(x)
-    return x if math.isfinite(x) else None
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return _num(v)
+    return v if v is None or isinstance(v, str) else str(v)
 
 
 @dataclass
 class Diagnosis:
-    """Every effect of the library ranked by how much error it explains on one run.
+    """Every effect of the library ranked by how much of the model's systematic error on
+    one run it explains.
 
     Attributes
     ----------
     suspects : list of Suspect
-        Ranked: significant ones first, then by score.
+        Ranked: significant ones first, then tested ones by score, untested last.
     nominal_error : float
-        Overall error of the model as given (``ERROR_DEFINITION``).
+        Systematic error of the model as given (``ERROR_DEFINITION``, noise units).
     channel_error : dict
-        Per-channel NRMSE of the model as given.
+        Noise multiple ``r_c`` of each channel for the model as given (1 = noise floor).
     comparison : Comparison
         The comparison of the model as given with the run (residual views).
     residual_white : bool
         Whether the model's residual is white on every channel (Comparison.whiteness).
     conclusion : str
-        One sentence: the top suspect, or that nothing significant is missing, or that
-        the residual is not white and no library effect explains it.
+        This round's finding (see :attr:`History.conclusion` for the whole loop's).
+    noise : dict
+        Each channel's white-noise floor σ (channel unit).
+    at_floor : list of str
+        Channels whose measured signal is at its noise floor (they carry no information).
     seconds : float
-        Wall time of the diagnosis [s].
+        Wall time [s].
     """
 
     suspects: List[Suspect]
@@ -367,6 +304,9 @@ class Diagnosis:
     run: str = ""
     seconds: float = 0.0
     n_rollouts: int = 0
+    noise: Dict[str, float] = field(default_factory=dict)
+    at_floor: List[str] = field(default_factory=list)
+    problem: Any = field(default=None, repr=False)
 
     @property
     def significant(self) -> List[Suspect]:
@@ -379,6 +319,11 @@ class Diagnosis:
         sig = self.significant
         return sig[0] if sig else None
 
+    @property
+    def untested(self) -> List[Suspect]:
+        """Effects that could not be tried (their ``message`` says why)."""
+        return [s for s in self.suspects if not s.tested]
+
     def __getitem__(self, effect: str) -> Suspect:
         for s in self.suspects:
             if s.effect == effect:
@@ -390,32 +335,37 @@ class Diagnosis:
         return f"Diagnosis(nominal_error={self.nominal_error:.4g}, top=[{top}], conclusion={self.conclusion!r})"
 
     def to_pandas(self) -> "pd.DataFrame":
-        """One row per effect (ranked): significant, score, error after, relative drop,
-        fitted parameters, evidence."""
+        """One row per effect (ranked): tested, significant, score, error after, share of
+        the systematic error explained, held-out error, parameters, identifiability, evidence."""
         pd = _pd()
         rows = []
         for rank, s in enumerate(self.suspects, 1):
             rows.append(
                 {
                     "rank": rank,
-                    "effect": s.effect,
+                    "effect": s.effect + (f" ({s.variant})" if s.variant else ""),
+                    "tested": s.tested,
                     "significant": s.significant,
                     "score": s.score,
                     "error_after": s.error_after,
-                    "relative_drop": s.relative_drop,
-                    "params": _fmt_params(s.params, s.ci95),
+                    "explained": s.explained,
+                    "validation_after": s.validation_after,
+                    "params": _fmt_params(s.params, s.ci95) if s.tested else s.message,
+                    "identifiability": s.identifiability.get("text", ""),
                     "evidence": s.evidence.get("text", ""),
                 }
             )
         return pd.DataFrame(rows).set_index("rank")
 
     def to_dict(self) -> Dict[str, Any]:
-        """JSON-ready: ``nominal_error``, ``error_definition``, ``suspects``, ``conclusion``."""
+        """JSON-ready: ``nominal_error``, ``error_definition``, ``noise``, ``suspects``, ``conclusion``."""
         return {
             "run": self.run,
             "nominal_error": _num(self.nominal_error),
             "error_definition": ERROR_DEFINITION,
             "channel_error": {k: _num(v) for k, v in self.channel_error.items()},
+            "noise": {k: _num(v) for k, v in self.noise.items()},
+            "at_noise_floor": list(self.at_floor),
             "residual_white": bool(self.residual_white),
             "suspects": [s.to_dict() for s in self.suspects],
             "conclusion": self.conclusion,
@@ -424,17 +374,18 @@ class Diagnosis:
         }
 
     def plot(self, ax: Any = None) -> Any:
-        """Bar chart: overall error with each effect fitted (significant ones coloured)."""
+        """Bar chart: systematic error with each effect fitted (significant ones coloured)."""
         import matplotlib.pyplot as plt
 
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 3.5))
-        names = [s.effect for s in self.suspects]
-        vals = [s.error_after for s in self.suspects]
-        colors = ["tab:red" if s.significant else "tab:gray" for s in self.suspects]
+        tested = [s for s in self.suspects if s.tested]
+        names = [s.effect for s in tested]
+        vals = [s.error_after for s in tested]
+        colors = ["tab:red" if s.significant else "tab:gray" for s in tested]
         ax.barh(names[::-1], vals[::-1], color=colors[::-1])
         ax.axvline(self.nominal_error, color="k", ls="--", label=f"nominal {self.nominal_error:.3g}")
-        ax.set_xlabel("overall error with the effect fitted (RMS of channel NRMSE)")
+        ax.set_xlabel("systematic error with the effect fitted [noise units]")
         ax.set_title("suspects (red: significant)")
         ax.legend(loc="lower right")
         return ax
@@ -464,12 +415,16 @@ class HistoryStep:
     error: float
     channel_error: Dict[str, float]
     model: Any = field(repr=False, default=None)
+    validation_error: float = math.nan
+    ci95: Dict[str, Dict[str, List[float]]] = field(default_factory=dict)
 
     def to_dict(self) -> Dict[str, Any]:
         return {
             "effects": list(self.effects),
             "error": _num(self.error),
+            "validation_error": _num(self.validation_error),
             "params": {e: {k: [_num(x) for x in v] for k, v in p.items()} for e, p in self.params.items()},
+            "ci95": {e: {k: [_num(x) for x in v] for k, v in p.items()} for e, p in self.ci95.items()},
             "channel_error": {k: _num(v) for k, v in self.channel_error.items()},
         }
 
@@ -487,7 +442,10 @@ class History:
     diagnoses : list of Diagnosis
         The diagnosis of each round (round i diagnoses ``steps[i]``).
     conclusion : str
-        Why the loop stopped.
+        Built from the whole history: what was added (value, interval, how far the error
+        fell overall and on the channels it acts on), then what is left.
+    error : str
+        Empty when complete; else what stopped the loop (the rounds before are kept).
     """
 
     steps: List[HistoryStep]
@@ -495,6 +453,13 @@ class History:
     conclusion: str
     run: str = ""
     seconds: float = 0.0
+    error: str = ""
+    noise: Dict[str, float] = field(default_factory=dict)
+
+    @property
+    def complete(self) -> bool:
+        """Whether every round finished (no ``error``)."""
+        return not self.error
 
     @property
     def model(self) -> Any:
@@ -508,40 +473,58 @@ class History:
 
     def __repr__(self) -> str:
         fall = " → ".join(f"{s.error:.3g}" for s in self.steps)
-        return f"History(effects={self.effects}, error {fall})"
+        return f"History(effects={self.effects}, error {fall}{', incomplete' if self.error else ''})"
 
     def to_pandas(self) -> "pd.DataFrame":
-        """One row per step: effects, overall error and per-channel NRMSE."""
+        """One row per step: effects, systematic error (whole run, held out) and each
+        channel's noise multiple."""
         pd = _pd()
         rows = []
         for i, s in enumerate(self.steps):
-            row: Dict[str, Any] = {"step": i, "effects": " + ".join(s.effects) or "nominal", "error": s.error}
-            row.update({f"nrmse {c}": v for c, v in s.channel_error.items()})
+            row: Dict[str, Any] = {"step": i, "effects": " + ".join(s.effects) or "nominal", "error": s.error, "validation_error": s.validation_error}
+            row.update({f"noise× {c}": v for c, v in s.channel_error.items()})
             rows.append(row)
         return pd.DataFrame(rows).set_index("step")
 
     def to_dict(self) -> Dict[str, Any]:
         """The CLI's ``--json`` contract: ``run``, ``nominal_error``, ``error_definition``,
-        ``suspects`` (first round, every effect ranked), ``history`` (each step's effects
-        and error), plus ``rounds`` and ``conclusion``."""
-        first = self.diagnoses[0]
-        return {
+        ``noise`` (σ per channel), ``channels`` (per channel: noise, noise multiple before
+        and after, at the noise floor), ``suspects`` (first round, every effect ranked),
+        ``history`` (each step's effects and error), ``rounds``, ``conclusion``,
+        ``complete`` and, when a round failed, ``error``."""
+        first = self.diagnoses[0] if self.diagnoses else None
+        floor = first.at_floor if first else []
+        out: Dict[str, Any] = {
             "run": self.run,
             "nominal_error": _num(self.steps[0].error),
             "error_definition": ERROR_DEFINITION,
-            "suspects": [s.to_dict() for s in first.suspects],
+            "noise": {k: _num(v) for k, v in self.noise.items()},
+            "channels": {
+                c: {
+                    "noise_std": _num(self.noise.get(c)),
+                    "noise_multiple_nominal": _num(self.steps[0].channel_error.get(c)),
+                    "noise_multiple_final": _num(self.steps[-1].channel_error.get(c)),
+                    "at_noise_floor": c in floor,
+                }
+                for c in self.steps[0].channel_error
+            },
+            "suspects": [s.to_dict() for s in first.suspects] if first else [],
             "history": [s.to_dict() for s in self.steps],
             "rounds": [d.to_dict() for d in self.diagnoses],
-            "residual_white": bool(self.diagnoses[-1].residual_white),
+            "residual_white": bool(self.diagnoses[-1].residual_white) if self.diagnoses else False,
             "conclusion": self.conclusion,
+            "complete": self.complete,
             "seconds": self.seconds,
         }
+        if self.error:
+            out["error"] = self.error
+        return out
 
     def to_json(self, **kw: Any) -> str:
         return json.dumps(self.to_dict(), **kw)
 
     def plot(self, ax: Any = None) -> Any:
-        """The fall of the error: overall (bold) and per channel, step by step."""
+        """The fall of the error: overall (bold) and each channel's noise multiple."""
         import matplotlib.pyplot as plt
 
         if ax is None:
@@ -551,84 +534,21 @@ class History:
         chans = list(self.steps[0].channel_error)
         for c in chans:
             ax.plot(x, [s.channel_error.get(c, np.nan) for s in self.steps], color="0.7", lw=1)
-        ax.plot(x, [s.error for s in self.steps], "o-", color="tab:red", lw=2.5, label="overall (RMS of channel NRMSE)")
+        ax.plot(x, [max(s.error, 1e-3) for s in self.steps], "o-", color="tab:red", lw=2.5, label="systematic error S")
+        ax.axhline(1.0, color="k", ls=":", lw=1, label="noise floor (channels)")
         ax.set_xticks(x)
         ax.set_xticklabels(labels, rotation=15)
         ax.set_yscale("log")
-        ax.set_ylabel("NRMSE (free-run replay)")
-        ax.set_title("error history (grey: channels)")
+        ax.set_ylabel("noise units")
+        ax.set_title("error history (grey: channels' noise multiples)")
         ax.legend()
         return ax
 
 
-# ---------------------------------------------------------------------------- fitting
+# ---------------------------------------------------------------------------- fitting one candidate
 
 
-def _fit(
-    prob: _Problem,
-    base_flat: np.ndarray,
-    free: List[Tuple[fx.EffectParam, int]],
-    x0: np.ndarray,
-    max_iter: int,
-    scale: Optional[np.ndarray] = None,
-) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Bounded least squares over the `free` (parameter, index) entries of the flat vector
-    (bounds: the parameters' ``lower``/``upper``; typical magnitudes ``scale``, default
-    :data:`_SCALE`). Returns (x, flat, residual (n, C), J at x (m, k))."""
-    from scipy.optimize import least_squares
-
-    lo = np.array([p.lower for p, _ in free])
-    hi = np.array([p.upper for p, _ in free])
-    sc = np.array([_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, dtype=float)
-    idx = np.array([p.offset + i for p, i in free])
-    # a start on a bound stalls the trust-region-reflective steps (their scaling is the
-    # distance to the bound): start a fraction of the typical scale inside
-    nudge = np.minimum(_NUDGE * sc, 0.5 * (hi - lo))
-    x0 = np.clip(x0, lo + nudge, hi - nudge)
-    cache: Dict[bytes, np.ndarray] = {}
-
-    def flat_of(x: np.ndarray) -> np.ndarray:
-        f = base_flat.copy()
-        f[idx] = x
-        return f
-
-    def eval_batch(xs: List[np.ndarray]) -> List[np.ndarray]:
-        todo = [x for x in xs if x.tobytes() not in cache]
-        if todo:
-            r = prob.residuals(prob.simulate(np.array([flat_of(x) for x in todo])))
-            for x, rr in zip(todo, r):
-                cache[x.tobytes()] = rr.reshape(-1)
-        return [cache[x.tobytes()] for x in xs]
-
-    def fun(x: np.ndarray) -> np.ndarray:
-        r = eval_batch([np.asarray(x, dtype=float)])[0]
-        return r if np.all(np.isfinite(r)) else np.full_like(r, 1e6)
-
-    def jac(x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
-        pts = []
-        hs = []
-        for j in range(len(x)):
-            h = 1e-4 * max(sc[j], abs(x[j]) * 0.1)
-            if x[j] + h > hi[j]:
-                h = -h
-            xp = x.copy()
-            xp[j] += h
-            pts.append(xp)
-            hs.append(h)
-        r0, *rs = eval_batch([x] + pts)
-        J = np.empty((r0.size, len(x)))
-        for j, (rj, h) in enumerate(zip(rs, hs)):
-            J[:, j] = (np.where(np.isfinite(rj), rj, 0.0) - r0) / h
-        return J
-
-    sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=sc, method=_METHOD, max_nfev=max_iter, xtol=1e-6, ftol=1e-6, gtol=1e-8)
-    x = sol.x
-    r = eval_batch([x])[0].reshape(len(prob.t_meas), len(prob.channels))
-    return x, flat_of(x), r, jac(x)
-
-
-def _x0(prob: _Problem, free: List[Tuple[fx.EffectParam, int]], base_flat: np.ndarray) -> np.ndarray:
+def _x0(prob: ReplayProblem, free: List[Tuple[fx.EffectParam, int]], base_flat: np.ndarray) -> np.ndarray:
     x0 = []
     for p, i in free:
         v = base_flat[p.offset + i]
@@ -636,11 +556,10 @@ def _x0(prob: _Problem, free: List[Tuple[fx.EffectParam, int]], base_flat: np.nd
             c = f"tau{i + 1}"
             if c in prob.channels:
                 # the plateau of the measured |torque|: the median of the samples within
-                # 4 noise deviations of the peak (the peak itself is biased up by the noise;
-                # in closed loop a limit 1 % high already changes the whole trajectory)
-                y = np.abs(prob.Y[:, prob.channels.index(c)])
+                # 4 noise deviations of the peak (the peak itself is biased up by the noise)
+                y = np.abs(prob.measured[:, prob.channels.index(c)])
                 y = y[np.isfinite(y)]
-                sd = float(np.std(np.diff(y))) / math.sqrt(2.0) if y.size > 2 else 0.0
+                sd = prob.noise[c]
                 top = y[y >= float(np.max(y)) - 4.0 * sd]
                 v = float(np.median(top))
             else:
@@ -651,15 +570,8 @@ def _x0(prob: _Problem, free: List[Tuple[fx.EffectParam, int]], base_flat: np.nd
     return np.array(x0, dtype=float)
 
 
-def _best_seed(prob: _Problem, effect: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """The best of ``x0`` and the effect's seed points, all simulated in one batch."""
-    cands = [x0]
-    for seed in _SEEDS.get(effect, []):
-        x = x0.copy()
-        for j, (p, _) in enumerate(free):
-            if p.name in seed:
-                x[j] = min(max(seed[p.name], p.lower), p.upper)
-        cands.append(x)
+def _candidates(effect: str, prob: ReplayProblem, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x0: np.ndarray, extra: Optional[List[Dict[str, float]]] = None) -> List[np.ndarray]:
+    cands = est.seed_points(effect, free, x0, extra)
     if effect == "actuator_saturation":
         # x0 puts every limit at its joint's measured peak; a joint that never saturated is
         # better left unlimited (its peak is only clipped by noise), so also try each joint
@@ -668,48 +580,466 @@ def _best_seed(prob: _Problem, effect: str, free: List[Tuple[fx.EffectParam, int
             x = np.full_like(x0, 1e3)
             x[k] = x0[k]
             cands.append(x)
-    if len(cands) == 1:
-        return x0
-    idx = np.array([p.offset + i for p, i in free])
-    flats = np.repeat(flat[None], len(cands), axis=0)
-    flats[:, idx] = np.array(cands)
-    r = prob.residuals(prob.simulate(flats))
-    rss = [float(np.sum(rr * rr)) for rr in r]
-    return cands[int(np.argmin(rss))]
+    return cands
 
 
-def _free_params(effect: str, only: Optional[Sequence[str]] = None) -> List[Tuple[fx.EffectParam, int]]:
-    out: List[Tuple[fx.EffectParam, int]] = []
-    for p in fx.EFFECTS[effect].params.values():
-        if (only is None and p.fit) or (only is not None and p.name in only):
-            out.extend((p, i) for i in range(p.length))
-    return out
+def _step_for(prob: ReplayProblem, m: "Model", check: "Model") -> float:
+    """The step [s] candidate ``m`` runs at: its own if stable with the margin, else the
+    largest divisor of the output period within ``STABILITY_MARGIN`` of the stability
+    limit of ``check`` (the candidate at its stiffest seed)."""
+    q = check.rest_state(list(prob.q_enc[0] if not prob.closed else prob.q0))
+    sdt = check.stable_dt(q, replay=not prob.closed)
+    if sdt >= m.dt * (1 - 1e-12) and sdt > m.dt / STABILITY_MARGIN * (1 - 1e-12):
+        return m.dt
+    if sdt >= m.dt * (1 - 1e-12):
+        sdt = m.dt  # stable, but without the margin: shrink from the model's own step
+    period = 1.0 / prob.sample_rate
+    k = max(1, int(math.ceil(period / (STABILITY_MARGIN * sdt) - 1e-9)))
+    return period / k
 
 
-def _params_dict(effect: str, flat: np.ndarray) -> Dict[str, List[float]]:
-    return {k: [float(x) for x in flat[p.slice]] for k, p in fx.EFFECTS[effect].params.items()}
+def _rank_key(s: Suspect) -> Tuple[int, int, float]:
+    return (0 if s.significant else 1, 0 if s.tested else 1, -s.score if math.isfinite(s.score) else math.inf)
 
 
-def _ci(prob: _Problem, r: np.ndarray, J: np.ndarray, free: List[Tuple[fx.EffectParam, int]], n_eff: float) -> Dict[str, List[float]]:
-    n = r.size
-    k = len(free)
-    rss = float(np.sum(r * r))
-    s2 = rss / max(n - k, 1) * max(n / n_eff, 1.0)
+class _Fitted:
+    """A fitted candidate on its own problem (possibly another structure and step)."""
+
+    def __init__(self, name: str, variant: str, prob: ReplayProblem, z_base: np.ndarray, free: List[Tuple[fx.EffectParam, int]], out: est.FitOutcome) -> None:
+        self.name, self.variant, self.prob, self.z_base, self.free, self.out = name, variant, prob, z_base, free, out
+        lr, self.neff = est.log_ratio(prob, z_base, out.z, prob.train)
+        self.k = len(free)
+        self.score = lr - self.k * math.log(self.neff)
+        self.lr_val, _ = est.log_ratio(prob, z_base, out.z, prob.validation)
+        self.e0, _ = prob.error(z_base)
+        self.e1, self.per1 = prob.error(out.z)
+        self.v0, _ = prob.error(z_base, prob.validation)
+        self.v1, _ = prob.error(out.z, prob.validation)
+        self.explained = 1.0 - (self.e1 / self.e0) ** 2 if self.e0 > 0 and math.isfinite(self.e1) else 0.0
+        self.significant = bool(
+            self.score > SCORE_THRESHOLD and self.explained >= MIN_EXPLAINED and self.lr_val > 0 and self.v1 < self.v0
+        )
+
+    def suspect(self, ev: Dict[str, Any], nfev: int, message: str = "") -> Suspect:
+        names = [f"{p.name}[{i}]" for p, i in self.free]
+        half, ident = est.uncertainty(self.out, self.free, names, self.neff)
+        ci: Dict[str, List[float]] = {}
+        for (p, i), h in zip(self.free, half):
+            ci.setdefault(p.name, [math.nan] * p.length)[i] = float(h)
+        return Suspect(
+            self.name, self.significant, float(self.score), est.params_dict(self.name, self.out.flat), ci, self.e0, self.e1, self.per1, ev,
+            n_eff=self.neff, n_rollouts=nfev, message=message, tested=True, explained=self.explained,
+            validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant,
+            identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free}),
+        )
+
+
+def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str, Any]], only: Optional[Sequence[str]], start: Optional[Dict[str, List[float]]],
+                   extra_seeds: Optional[List[Dict[str, float]]], max_iter: int, variant: str = "") -> Tuple[_Fitted, str]:
+    model = prob.model
+    m = model
+    note = ""
+    pb, z_base = prob, prob.residuals(prob.nominal_simulation())
+    if structure is not None:
+        m = model.with_effect(name, **structure)
+        check = m.with_effect(name, **_STIFFEST.get(name, {}))
+        dt = _step_for(prob, m, check)
+        if dt < model.dt * (1 - 1e-12):
+            m = m.with_dt(dt)
+            pb = prob.with_model(model.with_dt(dt))
+            z_base = pb.residuals(pb.nominal_simulation())
+            note = f"run at dt = {dt:.3g} s (its structure's stability limit; the nominal model re-run at the same step)"
+    p = pb.with_model(m) if m is not pb.model else pb
+    free = est.free_params(name, only)
+    flat = m.effects_flat.copy()
+    if start:
+        for k, v in start.items():
+            flat[fx.EFFECTS[name].params[k].slice] = v
+    x0 = np.array([flat[q.offset + i] for q, i in free]) if start else _x0(p, free, flat)
+    cands = _candidates(name, p, free, flat, x0, extra_seeds)
+    xs, _ = est.best_start(p, free, flat, cands)
+    out = est.fit(p, flat, free, xs, max(max_iter, _MIN_ITER.get(name, 0)))
+    return _Fitted(name, variant, p, z_base, free, out), note
+
+
+def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int) -> Suspect:
+    n0 = prob.nfev
     try:
-        cov = s2 * np.linalg.pinv(J.T @ J)
-        half = 1.96 * np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    except np.linalg.LinAlgError:
-        half = np.full(k, np.inf)
-    out: Dict[str, List[float]] = {}
+        fitted, note = _fit_candidate(prob, name, _STRUCTURE.get(name), None, None, None, max_iter)
+    except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
+        return Suspect(name, False, -math.inf, {}, {}, math.nan, math.nan, {}, ev, tested=False,
+                       message=f"not tested: {type(e).__name__}: {e}")
+    best = fitted
+    notes = [note] if note else []
+    if fitted.significant:
+        base_params = est.params_dict(name, fitted.out.flat)
+        for var in VARIANTS.get(name, []):
+            try:
+                struct = dict(_STRUCTURE.get(name) or {})
+                struct.update(var.get("structure") or {})
+                only = None
+                start = None
+                if var.get("extra"):
+                    only = sorted({p.name for p, _ in fitted.free} | set(var["extra"]))
+                    start = {k: v for k, v in base_params.items() if k in only and k not in var["extra"]}
+                vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]))
+            except Exception as e:  # noqa: BLE001
+                notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
+                continue
+            if vf.significant and vf.score > best.score:
+                notes.append(f"variant {var['name']} preferred (score {vf.score:.1f} vs {best.score:.1f})")
+                best = vf
+            else:
+                notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f})")
+    return best.suspect(ev, prob.nfev - n0 + (best.prob.nfev if best.prob is not prob else 0), "; ".join(notes))
+
+
+# ---------------------------------------------------------------------------- API
+
+
+def model_error(model: "Model", run: MeasuredRun, *, channels: Optional[Sequence[str]] = None, sample_rate: Optional[float] = None,
+                problem: Optional[ReplayProblem] = None) -> Tuple[float, Dict[str, float]]:
+    """Systematic error (:data:`ERROR_DEFINITION`) and each channel's noise multiple of
+    ``model`` on ``run``; with ``problem`` (e.g. ``Diagnosis.problem``) its channels, encoder
+    and noise floor are used, so the number is the one the diagnosis predicted."""
+    prob = problem.with_model(model) if problem is not None else ReplayProblem(model, run, channels=channels, sample_rate=sample_rate)
+    return prob.error()
+
+
+def diagnose(
+    model: "Model",
+    run: MeasuredRun,
+    *,
+    effects: Optional[Sequence[str]] = None,
+    channels: Optional[Sequence[str]] = None,
+    sample_rate: Optional[float] = None,
+    threads: int = 0,
+    max_iter: int = 15,
+    problem: Optional[ReplayProblem] = None,
+    progress: Optional[Progress] = None,
+) -> Diagnosis:
+    """Rank every effect of the library (or ``effects``) by how much of the model's
+    systematic error on ``run`` it explains, each fitted, validated on held-out samples,
+    with intervals, identifiability and its residual evidence (module docs).
+
+    Effects that ``model`` already has are skipped. ``threads=0`` uses every core.
+    ``problem``: the run already set up in ``model`` (:class:`ReplayProblem`).
+    ``progress``: called with ``{"effect", "done", "total"}`` before each effect.
+    """
+    t_start = time.perf_counter()
+    names = list(fx.EFFECT_NAMES if effects is None else effects)
+    for n in names:
+        fx.normalize(n, {})
+    if problem is None:
+        problem = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads)
+    elif problem.model is not model:
+        raise InputError("diagnose: problem= must be a ReplayProblem of this model (ReplayProblem.with_model)")
+    prob = problem
+    n_start = prob.nfev
+    cmp = compare(model, run, problem=prob)
+    e0, per0 = prob.error()
+    have = set(fx.active(model.effects_flat))
+    todo = [n for n in names if n not in have]
+    suspects: List[Suspect] = []
+    extra = 0
+    for i, name in enumerate(todo):
+        if progress is not None:
+            progress({"effect": name, "done": i, "total": len(todo)})
+        ev = _evidence(name, cmp, prob)
+        s = _try_effect(prob, name, ev, max_iter)
+        extra += s.n_rollouts
+        suspects.append(s)
+    suspects.sort(key=_rank_key)
+    white = bool(cmp.whiteness["is_white"].all())
+    d = Diagnosis(
+        suspects=suspects,
+        nominal_error=e0,
+        channel_error=per0,
+        comparison=cmp,
+        residual_white=white,
+        conclusion="",
+        run=str(run.source),
+        seconds=0.0,
+        n_rollouts=prob.nfev - n_start,
+        noise=prob.noise,
+        at_floor=prob.at_floor,
+        problem=prob,
+    )
+    d.conclusion = _round_conclusion(d)
+    d.seconds = time.perf_counter() - t_start
+    return d
+
+
+def _round_conclusion(d: Diagnosis) -> str:
+    b = d.best
+    parts = []
+    if b is not None:
+        parts.append(
+            f"{b.effect}{f' ({b.variant})' if b.variant else ''} explains the most: adding it is predicted to take the systematic error from "
+            f"{b.error_before:.3g} to {b.error_after:.3g} noise units ({100 * b.explained:.0f} % of it; held out {b.validation_before:.3g} → {b.validation_after:.3g})"
+        )
+    elif d.nominal_error <= AT_FLOOR:
+        parts.append(f"at the noise floor (systematic error {d.nominal_error:.3g} noise units): no library effect is significant")
+    else:
+        parts.append(f"no library effect explains the systematic error of {d.nominal_error:.3g} noise units: it is not explained by the library ({_where(d)})")
+    if d.untested:
+        parts.append("the ranking is incomplete: " + "; ".join(f"{s.effect} {s.message}" for s in d.untested))
+    return "; ".join(parts)
+
+
+def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
+    """Where the unexplained error sits: channels, time window, frequency band."""
+    per = d.channel_error if per is None else per
+    worst = sorted(per.items(), key=lambda kv: -kv[1])[:3]
+    txt = "worst channels " + ", ".join(f"{c} {v:.2g}× noise" for c, v in worst)
+    cmp = d.comparison
+    try:
+        w = cmp.windows.sort_values("rank").iloc[0]
+        txt += f"; worst window t = {float(w['t_start']):.3g}–{float(w['t_end']):.3g} s ({100 * float(w['error_share']):.0f} % of the error)"
+        c0 = worst[0][0]
+        sp = cmp.spectrum.loc[c0]
+        if str(sp["dominant_band"]):
+            txt += f"; {c0}'s residual mostly in {sp['dominant_band']} (peak {float(sp['peak_hz']):.3g} Hz)"
+    except Exception:  # noqa: BLE001 - a missing view must not hide the finding
+        pass
+    return txt
+
+
+# ---------------------------------------------------------------------------- the loop
+
+
+def improve(
+    model: "Model",
+    run: MeasuredRun,
+    *,
+    max_rounds: int = 4,
+    effects: Optional[Sequence[str]] = None,
+    channels: Optional[Sequence[str]] = None,
+    sample_rate: Optional[float] = None,
+    threads: int = 0,
+    max_iter: int = 15,
+    progress: Optional[Progress] = None,
+) -> History:
+    """The loop: diagnose, add the top significant effect, refit every added effect
+    jointly, diagnose again; until no effect is significant or ``max_rounds``.
+
+    Nothing is lost: a failure in round k returns rounds 1..k−1 with ``History.error``
+    set. Errors in the set-up (a run the model cannot replay at all) are raised."""
+    t_start = time.perf_counter()
+    prob = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads)
+    e0, per0 = prob.error()
+    steps = [HistoryStep([], {}, e0, per0, model, validation_error=prob.error(mask=prob.validation)[0])]
+    diags: List[Diagnosis] = []
+    added: List[str] = []
+    fitted_params: Dict[str, List[str]] = {}
+    current, cprob = model, prob
+    error = ""
+    rnd = 0
+
+    def prog(info: Dict[str, Any]) -> None:
+        if progress is not None:
+            progress(dict(info, round=rnd + 1))
+
+    try:
+        d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog)
+        diags.append(d)
+        while d.best is not None and len(added) < max_rounds:
+            rnd += 1
+            s = d.best
+            added.append(s.effect)
+            fitted_params[s.effect] = list(s.fitted)
+            cand = s.apply(current)
+            cprob = prob.with_model(cand)
+            if progress is not None:
+                progress({"round": rnd + 1, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
+            current, cprob, ci = _refit(cprob, added, fitted_params, max_iter)
+            err, per = cprob.error()
+            steps.append(HistoryStep(list(added), {e: current.effects.get(e, {}) for e in added}, err, per, current,
+                                     validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci))
+            remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
+            if not remaining:
+                break
+            d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog)
+            diags.append(d)
+    except KeyboardInterrupt:
+        raise
+    except Exception as e:  # noqa: BLE001 - nothing lost: the rounds before are returned
+        error = f"round {rnd + 1} failed: {type(e).__name__}: {e}"
+    h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise)
+    h.conclusion = _conclude(h, max_rounds)
+    h.seconds = time.perf_counter() - t_start
+    return h
+
+
+def _refit(prob: ReplayProblem, added: List[str], fitted: Dict[str, List[str]], max_iter: int) -> Tuple["Model", ReplayProblem, Dict[str, Dict[str, List[float]]]]:
+    """Refit every fitted parameter of the added effects jointly, from their current values."""
+    model = prob.model
+    flat = model.effects_flat
+    free = [pi for e in added for pi in est.free_params(e, fitted.get(e) or None)]
+    x0 = np.array([flat[p.offset + i] for p, i in free])
+    out = est.fit(prob, flat, free, x0, max([max_iter] + [_MIN_ITER.get(e, 0) for e in added]))
+    new = model.with_effects({e: est.params_dict(e, out.flat) for e in added})
+    nprob = prob.with_model(new)
+    _, ne = est.log_ratio(prob, out.z, out.z, prob.train)
+    half, _ = est.uncertainty(out, free, [f"{p.effect}.{p.name}[{i}]" for p, i in free], ne)
+    ci: Dict[str, Dict[str, List[float]]] = {}
     for (p, i), h in zip(free, half):
-        out.setdefault(p.name, [math.nan] * p.length)[i] = float(h)
-    return out
+        ci.setdefault(p.effect, {}).setdefault(p.name, [math.nan] * p.length)[i] = float(h)
+    return new, nprob, ci
+
+
+def _conclude(h: History, max_rounds: int) -> str:
+    """The whole history in words: what was added (value, interval, the fall of the error
+    overall and on the channels it acts on), then what is left."""
+    parts: List[str] = []
+    for i in range(1, len(h.steps)):
+        prev, st = h.steps[i - 1], h.steps[i]
+        e = st.effects[-1]
+        vals = st.params.get(e, {})
+        ci = st.ci95.get(e, {})
+        ptxt = _fmt_params({k: v for k, v in vals.items() if k in ci}, ci) or _fmt_params(vals, {})
+        drop = 1.0 - st.error / prev.error if prev.error > 0 else 0.0
+        moved = sorted(((c, prev.channel_error.get(c, math.nan), st.channel_error.get(c, math.nan)) for c in st.channel_error),
+                       key=lambda x: -(x[1] - x[2]) if math.isfinite(x[1] - x[2]) else 0.0)[:3]
+        ch = ", ".join(f"{c} {a:.2g}× → {b:.2g}× noise" for c, a, b in moved if a - b > 0.05 * a)
+        parts.append(f"added {e} ({ptxt}): the systematic error fell from {prev.error:.3g} to {st.error:.3g} noise units ({100 * drop:.0f} % less)"
+                     + (f"; on {ch}" if ch else ""))
+    last = h.steps[-1]
+    d_last = h.diagnoses[len(h.steps) - 1] if len(h.diagnoses) >= len(h.steps) else None
+    if last.error <= AT_FLOOR:
+        left = f"what is left is at the noise floor (systematic error {last.error:.3g} noise units)"
+        if not parts:
+            left = f"the model is at the noise floor (systematic error {last.error:.3g} noise units): nothing significant is missing"
+    else:
+        where = _where(d_last, last.channel_error) if d_last is not None else ", ".join(f"{c} {v:.2g}× noise" for c, v in sorted(last.channel_error.items(), key=lambda kv: -kv[1])[:3])
+        if d_last is not None and d_last.best is not None and len(h.steps) - 1 >= max_rounds:
+            left = f"stopped after max_rounds = {max_rounds}; {d_last.best.effect} is still significant ({where})"
+        else:
+            left = f"a systematic error of {last.error:.3g} noise units is left that is not explained by the library ({where})"
+    parts.append(left)
+    untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses for s in d.untested})
+    if untested:
+        parts.append("the ranking is incomplete: " + "; ".join(untested))
+    if h.error:
+        parts.append(f"incomplete: {h.error}; the rounds before it are kept")
+    text = "; ".join(parts)
+    return text[0].upper() + text[1:] + "."
+
+
+# ---------------------------------------------------------------------------- progress
+
+
+class TerminalProgress:
+    """Progress of :func:`improve` on a terminal (stderr, one line rewritten): round,
+    effect, fits done and an ETA from the mean time per fit so far."""
+
+    def __init__(self, stream: Any = None) -> None:
+        self.stream = sys.stderr if stream is None else stream
+        self.t0 = time.perf_counter()
+        self.fits = 0
+
+    def __call__(self, info: Dict[str, Any]) -> None:
+        self.fits += 1
+        el = time.perf_counter() - self.t0
+        left = max(int(info.get("total", 0)) - int(info.get("done", 0)), 0)
+        eta = el / max(self.fits - 1, 1) * left if self.fits > 1 else math.nan
+        eta_txt = f"ETA this round {eta:4.0f} s" if math.isfinite(eta) else "ETA …"
+        line = f"popup diagnose: round {info.get('round', 1)}  {str(info.get('effect', '')):<32} {info.get('done', 0)}/{info.get('total', 0)} fits  {el:5.0f} s  {eta_txt}"
+        self.stream.write("\r" + line[:118].ljust(118))
+        self.stream.flush()
+
+    def close(self) -> None:
+        self.stream.write("\r" + " " * 118 + "\r")
+        self.stream.flush()
+
+
+# ---------------------------------------------------------------------------- CLI
+
+
+def cli_main(argv: Sequence[str]) -> int:
+    """``popup diagnose RUN [--json] [--report out.html] ...``: load the run, compare,
+    rank every effect, add the significant ones in turn (refitting), print the suspects
+    and the error fall (or one JSON object with ``--json``). Exit 0 when complete, 1 when a
+    round failed (what finished is still printed and reported, with the error), 2 on bad
+    input (the message names what was wrong)."""
+    import argparse
+
+    from .exceptions import PopupError
+    from .io import read_run
+
+    ap = argparse.ArgumentParser(prog="popup diagnose", description="Rank the library's effects by how much of the model's systematic error each explains, then add them in turn.")
+    ap.add_argument("run", help="measured-run folder (experiment.toml + measurements.csv/parquet) or MCAP log")
+    ap.add_argument("--json", action="store_true", help="print one JSON object (run, nominal_error, error_definition, noise, suspects, history, conclusion, ...)")
+    ap.add_argument("--report", metavar="HTML", help="write the self-contained HTML report here")
+    ap.add_argument("--max-rounds", type=int, default=4, help="most effects to add (default 4)")
+    ap.add_argument("--effects", help="comma-separated effects to try (default: the whole library)")
+    ap.add_argument("--channels", help="comma-separated channels to compare (default: every comparable one)")
+    ap.add_argument("--threads", type=int, default=0, help="rollout threads (0 = all cores)")
+    ap.add_argument("--no-progress", action="store_true", help="no progress line on stderr (it is off anyway with --json or when stderr is not a terminal)")
+    a = ap.parse_args(list(argv))
+    show = not a.json and not a.no_progress and sys.stderr.isatty()
+    bar = TerminalProgress() if show else None
+    try:
+        run = read_run(a.run)
+        model = run.model()
+        effects = [e.strip() for e in a.effects.split(",")] if a.effects else None
+        channels = [c.strip() for c in a.channels.split(",")] if a.channels else None
+        h = improve(model, run, max_rounds=a.max_rounds, effects=effects, channels=channels, threads=a.threads, progress=bar)
+    except (PopupError, FileNotFoundError, NotADirectoryError) as e:
+        if bar is not None:
+            bar.close()
+        print(f"popup diagnose: error: {e}", file=sys.stderr)
+        return 2
+    if bar is not None:
+        bar.close()
+    h.run = a.run
+    for d in h.diagnoses:
+        d.run = a.run
+    rc = 0 if h.complete else 1
+    if a.report:
+        from .report import write_html
+
+        try:
+            write_html(h, a.report, title=f"popup diagnose {a.run}")
+        except Exception as e:  # noqa: BLE001 - the numbers still go out
+            print(f"popup diagnose: error: could not write the report {a.report}: {type(e).__name__}: {e}", file=sys.stderr)
+            rc = 1
+    if a.json:
+        print(json.dumps(h.to_dict(), allow_nan=False))
+        return rc
+    print(f"run: {a.run}")
+    print(f"error: {ERROR_DEFINITION}")
+    print(f"nominal error: {h.steps[0].error:.4g} noise units")
+    floor = h.diagnoses[0].at_floor if h.diagnoses else []
+    print("channels (noise σ, nominal → final noise multiple):")
+    for c, v in h.steps[0].channel_error.items():
+        print(f"  {c:<9} σ = {h.noise.get(c, math.nan):<10.3g} {v:8.3g}× → {h.steps[-1].channel_error.get(c, math.nan):.3g}×{'  (signal at the noise floor)' if c in floor else ''}")
+    if h.diagnoses:
+        d0 = h.diagnoses[0]
+        print()
+        print(f"{'rank':>4}  {'effect':<22}{'sig':<5}{'score':>10}{'error after':>13}{'explained':>10}  parameters")
+        for i, s in enumerate(d0.suspects, 1):
+            score = f"{s.score:.1f}" if math.isfinite(s.score) else "n/a"
+            params = s.params_text() if s.tested else s.message
+            after = f"{s.error_after:.4g}" if s.tested else "not tested"
+            print(f"{i:>4}  {s.effect:<22}{'yes' if s.significant else 'no':<5}{score:>10}{after:>13}{100 * s.explained:>9.0f}%  {params}")
+    print()
+    print("error history (systematic error, noise units):")
+    for st in h.steps:
+        print(f"  {' + '.join(st.effects) or 'nominal':<40} {st.error:.4g}")
+    print()
+    print(h.conclusion)
+    if h.error:
+        print(f"popup diagnose: incomplete: {h.error}", file=sys.stderr)
+    if a.report:
+        print(f"report: {a.report}")
+    return rc
 
 
 # ---------------------------------------------------------------------------- evidence
 
 
-def _evidence(effect: str, cmp: Comparison, prob: _Problem) -> Dict[str, Any]:
+def _evidence(effect: str, cmp: Comparison, prob: ReplayProblem) -> Dict[str, Any]:
     sig = fx.SIGNATURES.get(effect, "")
     res = cmp.residuals
     t = res.index.to_numpy()
@@ -766,7 +1096,7 @@ def _evidence(effect: str, cmp: Comparison, prob: _Problem) -> Dict[str, Any]:
                       text=f"samples with |M| > 0.8·M_w carry {ratio:.2f}× their share of the error" if math.isfinite(ratio) else "no sample near M_w")
         elif effect == "payload_mass":
             chans = [c for c in ("tau2", "tau3", "ee_z") if c in res]
-            means = {c: float(np.nanmean(res[c])) / max(float(np.nanstd(prob.Y[:, prob.channels.index(c)])), 1e-300) for c in chans}
+            means = {c: float(np.nanmean(res[c])) / max(float(np.nanstd(prob.measured[:, prob.channels.index(c)])), 1e-300) for c in chans}
             c = max(means, key=lambda k: abs(means[k])) if means else ""
             ev.update(statistic="mean residual / measured std of the gravity-loaded channels", value=abs(means.get(c, 0.0)),
                       text=f"{c} has a bias of {means.get(c, 0.0):+.2f} std (gravity load or sag)" if c else "no gravity-loaded channel")
@@ -785,7 +1115,7 @@ def _evidence(effect: str, cmp: Comparison, prob: _Problem) -> Dict[str, Any]:
                 c = f"tau{j + 1}"
                 if c not in res:
                     continue
-                y = prob.Y[:, prob.channels.index(c)]
+                y = prob.measured[:, prob.channels.index(c)]
                 at = np.abs(y) >= 0.98 * np.nanmax(np.abs(y))
                 e2 = res[c].to_numpy() ** 2
                 r = _share_ratio(np.where(np.isfinite(e2), e2, 0.0), at)
@@ -810,7 +1140,7 @@ def _evidence(effect: str, cmp: Comparison, prob: _Problem) -> Dict[str, Any]:
     return ev
 
 
-def _rate(prob: _Problem, j: int, t: np.ndarray) -> np.ndarray:
+def _rate(prob: ReplayProblem, j: int, t: np.ndarray) -> np.ndarray:
     return np.interp(t, prob.t_enc, np.gradient(prob.q_enc[:, j], prob.t_enc))
 
 
@@ -832,7 +1162,7 @@ def _share_ratio(e2: np.ndarray, mask: np.ndarray) -> float:
     return float(e2[mask].sum() / max(e2.sum(), 1e-300)) / float(mask.mean())
 
 
-def _first_mode_hz(prob: _Problem) -> float:
+def _first_mode_hz(prob: ReplayProblem) -> float:
     try:
         modes = [float(x) for x in np.asarray(prob.model.locked_modes(list(prob.q_enc[0])), float) if x > 0]
         return min(modes) / (2 * math.pi) if modes else math.nan
@@ -840,228 +1170,3 @@ def _first_mode_hz(prob: _Problem) -> float:
         return math.nan
 
 
-# ---------------------------------------------------------------------------- API
-
-
-def _prepare(model: "Model", run: MeasuredRun, channels: Optional[Sequence[str]], sample_rate: Optional[float]) -> Tuple[Comparison, List[str], float]:
-    if not isinstance(run, MeasuredRun):
-        raise InputError(f"diagnose: expected a popup.MeasuredRun (popup.read_run), got {type(run).__name__}")
-    cmp = compare(model, run, channels=channels, sample_rate=sample_rate)
-    sr = float(cmp.simulated.params.get("sample_rate_hz", 0.0)) or 1.0 / float(np.median(np.diff(cmp.simulated.time)))
-    return cmp, cmp.channels, sr
-
-
-def model_error(model: "Model", run: MeasuredRun, *, channels: Optional[Sequence[str]] = None, sample_rate: Optional[float] = None) -> Tuple[float, Dict[str, float]]:
-    """Overall error (:data:`ERROR_DEFINITION`) and per-channel NRMSE of ``model`` on
-    ``run``, computed exactly as the diagnosis predicts it."""
-    cmp, chans, sr = _prepare(model, run, channels, sample_rate)
-    prob = _Problem(model, run, chans, sr, 0)
-    r = prob.residuals(prob.simulate(model.effects_flat[None]))[0]
-    return prob.error(r)
-
-
-def diagnose(
-    model: "Model",
-    run: MeasuredRun,
-    *,
-    effects: Optional[Sequence[str]] = None,
-    channels: Optional[Sequence[str]] = None,
-    sample_rate: Optional[float] = None,
-    threads: int = 0,
-    max_iter: int = 15,
-) -> Diagnosis:
-    """Rank every effect of the library (or ``effects``) by how much of the model's error
-    on ``run`` it explains, each with fitted parameters, confidence intervals, the
-    predicted error after adding it and its residual evidence (module docs).
-
-    Effects that ``model`` already has are skipped. ``threads=0`` uses every core.
-    """
-    t_start = time.perf_counter()
-    names = list(fx.EFFECT_NAMES if effects is None else effects)
-    for n in names:
-        fx.normalize(n, {})
-    cmp, chans, sr = _prepare(model, run, channels, sample_rate)
-    base_flat = model.effects_flat
-    prob = _Problem(model, run, chans, sr, threads)
-    r0 = prob.residuals(prob.simulate(base_flat[None]))[0]
-    e0, per0 = prob.error(r0)
-    rss0 = float(np.sum(r0 * r0))
-    have = set(fx.active(base_flat))
-    suspects: List[Suspect] = []
-    for name in names:
-        if name in have:
-            continue
-        ev = _evidence(name, cmp, prob)
-        s = _try_effect(model, run, prob, name, base_flat, rss0, e0, ev, sr, threads, max_iter)
-        suspects.append(s)
-    suspects.sort(key=lambda s: (not s.significant, -s.score if math.isfinite(s.score) else math.inf))
-    white = bool(cmp.whiteness["is_white"].all())
-    conclusion = _conclude(suspects, white, e0)
-    return Diagnosis(
-        suspects=suspects,
-        nominal_error=e0,
-        channel_error=per0,
-        comparison=cmp,
-        residual_white=white,
-        conclusion=conclusion,
-        run=str(run.source),
-        seconds=time.perf_counter() - t_start,
-        n_rollouts=2 + sum(s.n_rollouts for s in suspects),  # the comparison, the nominal residual, the fits
-    )
-
-
-def _try_effect(
-    model: "Model", run: MeasuredRun, prob: _Problem, name: str, base_flat: np.ndarray, rss0: float, e0: float, ev: Dict[str, Any], sr: float, threads: int, max_iter: int
-) -> Suspect:
-    struct = _STRUCTURE.get(name)
-    m = model
-    p = prob
-    flat = base_flat.copy()
-    start = prob.nfev
-    try:
-        if struct is not None:
-            m = model.with_effect(name, **struct)
-            p = _Problem(m, run, prob.channels, sr, threads)
-            start = 0
-            flat = m.effects_flat
-        free = _free_params(name)
-        x0 = _best_seed(p, name, free, flat, _x0(p, free, flat))
-        x, flat_fit, r, J = _fit(p, flat, free, x0, max(max_iter, _MIN_ITER.get(name, 0)))
-    except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
-        return Suspect(name, False, -math.inf, {}, {}, e0, e0, {}, ev, n_rollouts=p.nfev - start, message=f"{type(e).__name__}: {e}")
-    e1, per1 = p.error(r)
-    rss1 = float(np.sum(r * r))
-    neff = p.n_eff(r)
-    k = len(free)
-    score = neff * math.log(max(rss0, 1e-300) / max(rss1, 1e-300)) - k * math.log(neff)
-    drop = 1.0 - e1 / e0 if e0 > 0 else 0.0
-    sig = bool(score > SCORE_THRESHOLD and drop >= MIN_RELATIVE_DROP)
-    params = _params_dict(name, flat_fit)
-    ci = _ci(p, r, J, free, neff)
-    return Suspect(name, sig, float(score), params, ci, e0, e1, per1, ev, n_eff=neff, n_rollouts=p.nfev - start)
-
-
-def _conclude(suspects: List[Suspect], white: bool, e0: float) -> str:
-    sig = [s for s in suspects if s.significant]
-    if sig:
-        b = sig[0]
-        return f"{b.effect} explains the most error: adding it is predicted to take the error from {e0:.3g} to {b.error_after:.3g} ({100 * b.relative_drop:.0f} % less)"
-    tried = [s for s in suspects if math.isfinite(s.score)]
-    best = max(tried, key=lambda s: s.relative_drop) if tried else None
-    if white:
-        return "no significant effect: the residual is white and no library effect lowers the error beyond its complexity penalty"
-    extra = f" (the best, {best.effect}, lowers the error by only {100 * best.relative_drop:.0f} %)" if best else ""
-    return "the residual is not white and no library effect explains it" + extra + ": something outside the library is missing (look at the residual spectrum and windows)"
-
-
-def improve(
-    model: "Model",
-    run: MeasuredRun,
-    *,
-    max_rounds: int = 4,
-    effects: Optional[Sequence[str]] = None,
-    channels: Optional[Sequence[str]] = None,
-    sample_rate: Optional[float] = None,
-    threads: int = 0,
-    max_iter: int = 15,
-) -> History:
-    """The loop: diagnose, add the top significant effect, refit every added effect
-    jointly, compare again; until no effect is significant or ``max_rounds``."""
-    t_start = time.perf_counter()
-    d = diagnose(model, run, effects=effects, channels=channels, sample_rate=sample_rate, threads=threads, max_iter=max_iter)
-    steps = [HistoryStep([], {}, d.nominal_error, d.channel_error, model)]
-    diags = [d]
-    added: List[str] = []
-    current = model
-    conclusion = d.conclusion
-    while d.best is not None and len(added) < max_rounds:
-        s = d.best
-        added.append(s.effect)
-        current = s.apply(current)
-        current, err, per = _refit(current, run, added, d.comparison.channels, sample_rate, threads, max_iter)
-        steps.append(HistoryStep(list(added), {e: current.effects.get(e, {}) for e in added}, err, per, current))
-        remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
-        if not remaining:
-            conclusion = "every library effect has been added"
-            break
-        d = diagnose(current, run, effects=remaining, channels=channels, sample_rate=sample_rate, threads=threads, max_iter=max_iter)
-        diags.append(d)
-        conclusion = d.conclusion
-    if d.best is not None and len(added) >= max_rounds:
-        conclusion = f"stopped after max_rounds = {max_rounds}; {d.best.effect} is still significant"
-    return History(steps, diags, conclusion, run=str(run.source), seconds=time.perf_counter() - t_start)
-
-
-def _refit(model: "Model", run: MeasuredRun, added: List[str], channels: Sequence[str], sample_rate: Optional[float], threads: int, max_iter: int) -> Tuple["Model", float, Dict[str, float]]:
-    """Refit every parameter of the added effects jointly, from their current values."""
-    cmp, chans, sr = _prepare(model, run, channels, sample_rate)
-    prob = _Problem(model, run, chans, sr, threads)
-    flat = model.effects_flat
-    free = [pi for e in added for pi in _free_params(e)]
-    x0 = np.array([flat[p.offset + i] for p, i in free])
-    x, flat_fit, r, _ = _fit(prob, flat, free, x0, max([max_iter] + [_MIN_ITER.get(e, 0) for e in added]))
-    new = model.with_effects({e: _params_dict(e, flat_fit) for e in added})
-    err, per = prob.error(r)
-    return new, err, per
-
-
-# ---------------------------------------------------------------------------- CLI
-
-
-def cli_main(argv: Sequence[str]) -> int:
-    """``popup diagnose RUN [--json] [--report out.html] ...``: load the run, compare,
-    rank every effect, add the significant ones in turn (refitting), print the suspects
-    and the error fall (or one JSON object with ``--json``). Exit 0 on success, 2 on bad
-    input (the message names what was wrong)."""
-    import argparse
-    import sys
-
-    from .exceptions import PopupError
-    from .io import read_run
-
-    ap = argparse.ArgumentParser(prog="popup diagnose", description="Rank the library's effects by how much of the model-vs-measurement error each explains, then add them in turn.")
-    ap.add_argument("run", help="measured-run folder (experiment.toml + measurements.csv/parquet)")
-    ap.add_argument("--json", action="store_true", help="print one JSON object (run, nominal_error, error_definition, suspects, history, ...)")
-    ap.add_argument("--report", metavar="HTML", help="write the self-contained HTML report here")
-    ap.add_argument("--max-rounds", type=int, default=4, help="most effects to add (default 4)")
-    ap.add_argument("--effects", help="comma-separated effects to try (default: the whole library)")
-    ap.add_argument("--channels", help="comma-separated channels to compare (default: every comparable one)")
-    ap.add_argument("--threads", type=int, default=0, help="rollout threads (0 = all cores)")
-    a = ap.parse_args(list(argv))
-    try:
-        run = read_run(a.run)
-        model = run.model()
-        effects = [e.strip() for e in a.effects.split(",")] if a.effects else None
-        channels = [c.strip() for c in a.channels.split(",")] if a.channels else None
-        h = improve(model, run, max_rounds=a.max_rounds, effects=effects, channels=channels, threads=a.threads)
-    except (PopupError, FileNotFoundError, NotADirectoryError) as e:
-        print(f"popup diagnose: error: {e}", file=sys.stderr)
-        return 2
-    h.run = a.run
-    for d in h.diagnoses:
-        d.run = a.run
-    if a.report:
-        from .report import write_html
-
-        write_html(h, a.report, title=f"popup diagnose {a.run}")
-    if a.json:
-        print(json.dumps(h.to_dict(), allow_nan=False))
-        return 0
-    d0 = h.diagnoses[0]
-    print(f"run: {a.run}")
-    print(f"nominal error: {d0.nominal_error:.4g}  ({ERROR_DEFINITION})")
-    print()
-    print(f"{'rank':>4}  {'effect':<22}{'sig':<5}{'score':>10}{'error after':>13}{'drop':>7}  parameters")
-    for i, s in enumerate(d0.suspects, 1):
-        score = f"{s.score:.1f}" if math.isfinite(s.score) else "n/a"
-        params = s.params_text() or s.message
-        print(f"{i:>4}  {s.effect:<22}{'yes' if s.significant else 'no':<5}{score:>10}{s.error_after:>13.4g}{100 * s.relative_drop:>6.0f}%  {params}")
-    print()
-    print("error history:")
-    for st in h.steps:
-        print(f"  {' + '.join(st.effects) or 'nominal':<40} {st.error:.4g}")
-    print()
-    print(h.conclusion)
-    if a.report:
-        print(f"report: {a.report}")
-    return 0

@@ -9,12 +9,16 @@
     res.model             # the model with the fitted values
     res.plot()            # measured vs simulated before/after, per channel
 
-The same machinery as :func:`popup.diagnose` (the free-run replay error of
-:data:`popup.diagnosis.ERROR_DEFINITION`, bounded trust-region-reflective least squares,
-forward-difference Jacobians as one batched rollout, Gauss–Newton 95 % intervals inflated
-for residual correlation), for any parameters of any effects, including those the
-diagnosis does not fit by default (structural settings excepted: they change the chain)
-and with the user's own bounds, typical scales, start, seed grid and initial state.
+The same problem and objective as :func:`popup.diagnose` (a :class:`popup.ReplayProblem`;
+Gaussian maximum likelihood with an unknown variance per channel, :mod:`popup.estimate`;
+errors in noise units, :data:`popup.problem.ERROR_DEFINITION`), for any parameters of any
+effects, including those the diagnosis does not fit by default (structural settings
+excepted: they change the chain) and with the user's own bounds, typical scales, start,
+seed grid and initial state. Multi-start by default: the start, the effects' seed points
+and the grid are simulated in one batch, the best three are fitted, and
+:attr:`FitResult.warnings` says when the starts end in different minima or the best fit
+sits at a bound; :attr:`FitResult.identifiability` names parameters the run cannot pin
+down (their interval is ``inf``).
 
 A parameter is named ``"effect.name"`` (every entry: per joint or per link) or
 ``"effect.name[i]"`` (one entry, 0-based), e.g. ``"higher_bending_modes.e_pa[1]"``, the
@@ -25,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import re
 import time
 from dataclasses import dataclass, field
@@ -33,8 +38,10 @@ from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, 
 import numpy as np
 
 from . import effects as fx
+from . import estimate as est
 from .exceptions import InputError
 from .io import MeasuredRun
+from .problem import ReplayProblem
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
@@ -106,7 +113,8 @@ class FitResult:
     lower: np.ndarray
     upper: np.ndarray
     error_before: float
-    """Overall error (:data:`popup.diagnosis.ERROR_DEFINITION`) of the model as given."""
+    """Systematic error in noise units (:data:`popup.problem.ERROR_DEFINITION`) of the
+    model as given."""
     error: float
     """Overall error with the fitted values."""
     per_channel_before: Dict[str, float]
@@ -123,6 +131,13 @@ class FitResult:
     """Rollouts run (seed grid, Jacobians, steps)."""
     seconds: float
     extra: Dict[str, Any] = field(default_factory=dict)
+    warnings: List[str] = field(default_factory=list)
+    """Fits that ended elsewhere from other starts, parameters at a bound."""
+    identifiability: Dict[str, Any] = field(default_factory=dict)
+    """Rank, condition, correlations and the parameters the run cannot pin down
+    (:func:`popup.estimate.uncertainty`)."""
+    noise: Dict[str, float] = field(default_factory=dict)
+    """Each channel's white-noise floor σ (channel unit)."""
 
     @property
     def params(self) -> Dict[str, float]:
@@ -162,17 +177,6 @@ class FitResult:
         return fig
 
 
-def _ci95(r: np.ndarray, J: np.ndarray, n_eff: float) -> np.ndarray:
-    """95 % half widths from the Gauss–Newton covariance s²(JᵀJ)⁻¹, s² = RSS/(n − k)
-    inflated by n/n_eff (as the diagnosis's intervals)."""
-    n, k = r.size, J.shape[1]
-    s2 = float(np.sum(r * r)) / max(n - k, 1) * max(n / n_eff, 1.0)
-    try:
-        return 1.96 * np.sqrt(np.clip(np.diag(s2 * np.linalg.pinv(J.T @ J)), 0.0, None))
-    except np.linalg.LinAlgError:
-        return np.full(k, np.inf)
-
-
 def fit_params(
     model: "Model",
     run: MeasuredRun,
@@ -188,6 +192,8 @@ def fit_params(
     initial_v: Any = None,
     threads: int = 0,
     max_iter: int = 40,
+    seeds: bool = True,
+    starts: int = 3,
 ) -> FitResult:
     """Fit the named effect parameters of ``model`` to the measured ``run`` (free-run
     replay of its encoders, or of its references in closed loop).
@@ -206,9 +212,12 @@ def fit_params(
     channels, sample_rate : as :func:`popup.compare.compare`.
     initial_q, initial_v : the initial state (chain coordinates and rates, (nv,)); default
         from the run (at rest, or its ``[initial]`` table).
+    seeds : also start from the effects' seed points (:data:`popup.estimate.SEEDS`);
+        every start is simulated in one batch.
+    starts : the best ``starts`` starts are each fitted; the best fit is kept and
+        :attr:`FitResult.warnings` says when another start ended elsewhere or the fit sits
+        at a bound.
     """
-    from . import diagnosis as dg
-
     t_start = time.perf_counter()
     entries = _parse(params)
     for what, d in (("bounds", bounds), ("scale", scale), ("x0", x0), ("grid", grid)):
@@ -233,44 +242,76 @@ def fit_params(
             raise InputError(f"input x0: {key} = {v} is outside its bounds [{lo}, {hi}]")
         start.append(v)
         s = _lookup(scale, key, 1)
-        s = dg._SCALE.get((p.effect, p.name), max(abs(v), 1e-12)) if s is None else float(s)
+        s = est.PARAM_SCALE.get((p.effect, p.name), max(abs(v), 1e-12)) if s is None else float(s)
         if not (np.isfinite(s) and s > 0):
             raise InputError(f"input scale: {key} = {s} must be finite and > 0")
         sc.append(s)
     x_start = np.array(start)
-    cmp, chans, sr = dg._prepare(model, run, channels, sample_rate)
-    prob = dg._Problem(model, run, chans, sr, threads)
+    prob = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads)
+    chans = prob.channels
     if initial_q is not None or initial_v is not None:
         nv = len(model.joint_names)
         iq = np.zeros(nv) if initial_q is None else np.asarray(initial_q, dtype=float)
         iv = np.zeros(nv) if initial_v is None else np.asarray(initial_v, dtype=float)
         if iq.shape != (nv,) or iv.shape != (nv,):
             raise InputError(f"input initial_q/initial_v: shapes {iq.shape}, {iv.shape}; the model has {nv} joints")
-        prob.iq, prob.iv = iq, iv
+        prob = prob.with_initial_state(iq, iv)
+    everything = np.ones(len(prob.time), dtype=bool)
     idx = np.array([p.offset + i for p, i in free])
-    sim_before = prob.simulate(flat[None])
+    sim_before = prob.nominal_simulation()[None]
     err_before, per_before = prob.error(prob.residuals(sim_before)[0])
+    # starts: the given one, the effects' seed points (multi-start), the user's grid
+    cands = [x_start]
+    if seeds:
+        for eff in sorted({p.effect for p, _ in free}):
+            for seed in est.SEEDS.get(eff, []):
+                x = x_start.copy()
+                for j, (p, _) in enumerate(free):
+                    if p.effect == eff and p.name in seed:
+                        x[j] = min(max(seed[p.name], p.lower), p.upper)
+                if not any(np.array_equal(x, c) for c in cands):
+                    cands.append(x)
     if grid:
         axes = []
         for j, (_, _, key) in enumerate(entries):
             g = _lookup(grid, key, 2)
             axes.append([x_start[j]] if g is None else [float(v) for v in np.atleast_1d(g)])
-        cands = np.array(list(itertools.product(*axes)))
-        flats = np.repeat(flat[None], len(cands), axis=0)
-        flats[:, idx] = cands
-        r = prob.residuals(prob.simulate(flats))
-        rss = np.array([float(np.sum(rr * rr)) for rr in r])
-        x_start = cands[int(np.nanargmin(np.where(np.isfinite(rss), rss, np.inf)))]
-    x, flat_fit, r, J = dg._fit(prob, flat, free, x_start, max_iter, scale=np.array(sc))
-    err, per = prob.error(r)
-    half = _ci95(r, J, prob.n_eff(r))
+        cands.extend(np.array(c, dtype=float) for c in itertools.product(*axes))
+    flats = np.repeat(flat[None], len(cands), axis=0)
+    flats[:, idx] = np.array(cands)
+    z = prob.residuals(prob.simulate(flats))
+    obj = np.array([_objective(prob, zz, everything) for zz in z])
+    order = [int(i) for i in np.argsort(obj, kind="stable") if np.isfinite(obj[i])][: max(1, int(starts))]
+    if not order:
+        raise InputError("fit_params: every start failed to simulate (see the model's step check); give x0= or bounds= inside the stable region")
+    fits = []
+    for i in order:
+        out = est.fit(prob, flat, free, cands[i], max_iter, scale=np.array(sc), mask=everything)
+        fits.append((_objective(prob, out.z, everything), cands[i], out))
+    fits.sort(key=lambda f: f[0])
+    best_obj, x_first, out = fits[0]
+    x, flat_fit = out.x, out.flat
+    err, per = prob.error(out.z)
+    _, ne = est.log_ratio(prob, out.z, out.z, everything)
+    names = [k for _, _, k in entries]
+    half, ident = est.uncertainty(out, free, names, ne, scale=np.array(sc))
+    warns: List[str] = []
+    if ident["at_bound"]:
+        warns.append(f"the best fit sits at a bound: {', '.join(ident['at_bound'])}")
+    for o, x_s, other in fits[1:]:
+        if np.any(np.abs(other.x - x) > np.maximum(half, 1e-3 * np.array(sc))) :
+            warns.append(
+                f"another start ({', '.join(f'{n}={v:.4g}' for n, v in zip(names, x_s))}) ended elsewhere "
+                f"({', '.join(f'{n}={v:.4g}' for n, v in zip(names, other.x))}) with a worse likelihood "
+                f"(Δ = {0.5 * (o - best_obj):.3g}): the objective has several minima; the best is kept"
+            )
     by_effect: Dict[str, Dict[str, List[float]]] = {}
     for p, _ in free:
         by_effect.setdefault(p.effect, {})[p.name] = [float(v) for v in flat_fit[p.slice]]
     fitted = model.with_effects(by_effect)
     return FitResult(
-        names=[k for _, _, k in entries],
-        x0=x_start,
+        names=names,
+        x0=np.asarray(x_first, dtype=float),
         x=np.asarray(x, dtype=float),
         ci95=half,
         lower=np.array([p.lower for p, _ in free]),
@@ -281,10 +322,19 @@ def fit_params(
         per_channel=per,
         model=fitted,
         channels=list(chans),
-        time=np.asarray(prob.t_meas),
-        measured=np.asarray(prob.Y),
+        time=np.asarray(prob.time),
+        measured=np.asarray(prob.measured),
         simulated_before=sim_before[0],
         simulated=prob.simulate(flat_fit[None])[0],
         nfev=prob.nfev,
         seconds=time.perf_counter() - t_start,
+        warnings=warns,
+        identifiability=ident,
+        noise=prob.noise,
     )
+
+
+def _objective(prob: ReplayProblem, z: np.ndarray, mask: np.ndarray) -> float:
+    """−2 × the profile log-likelihood (up to a constant): Σ_c n_c ln mean z_c²."""
+    ms, n, _ = prob.channel_stats(z, mask)
+    return float(np.sum(n * np.log(np.maximum(ms, 1e-300)))) if np.all(np.isfinite(ms)) else math.inf

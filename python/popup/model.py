@@ -7,6 +7,7 @@ Units are SI (m, kg, s, rad, N·m, Pa). Joint order of the chain is
 
 from __future__ import annotations
 
+import math
 import os
 import warnings as _warnings
 from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
@@ -297,6 +298,16 @@ class Model:
     def _recompiled(self, arm: "_core.Arm") -> "Model":
         dis = list(self._m.disabled)
         core = _core.Model(arm, dt=self.dt, integrator=self.integrator, gravity=None if "gravity" in dis else list(self._m.gravity), disable=dis)
+        return Model(payload_kg=self.payload_kg, pressure_pa=self.pressure_pa, _core_model=core)
+
+    def with_dt(self, dt: float, integrator: Optional[str] = None) -> "Model":
+        """A copy with another physics step ``dt`` [s] (and integrator, default this one's);
+        arm, effects and parameters unchanged."""
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise InputError(f"input dt: {dt} must be finite and > 0 [s]")
+        dis = list(self._m.disabled)
+        core = _core.Model(self._m.arm, dt=dt, integrator=integrator or self.integrator, gravity=None if "gravity" in dis else list(self._m.gravity), disable=dis)
         return Model(payload_kg=self.payload_kg, pressure_pa=self.pressure_pa, _core_model=core)
 
     def with_params(self, *, payload_kg: Optional[float] = None, pressure_pa: Optional[Sequence[float]] = None) -> "Model":

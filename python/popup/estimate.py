@@ -1,0 +1,340 @@
+"""Fitting effect parameters to a :class:`~popup.problem.ReplayProblem`: the one
+objective, multi-start, intervals and identifiability, shared by :func:`popup.diagnose`,
+:func:`popup.improve` and :func:`popup.fit_params`.
+
+Objective
+---------
+Gaussian maximum likelihood with an unknown noise variance per channel: the profile
+log-likelihood of the training samples is ``ℓ = −½ Σ_c n_c ln(mean z_c²)`` (z in noise
+units, :mod:`popup.problem`). It is maximised by iteratively reweighted least squares:
+bounded trust-region-reflective least squares (``scipy.optimize.least_squares``) on
+``z_c / sqrt(v_c)`` with ``v_c = max(mean z_c², 1)`` at the start, then once more with
+``v_c`` at the optimum when that changed a weight by more than 2×. A channel's weight is
+so the inverse of its whole residual variance: a channel the model cannot explain at all
+does not drag the fit, and channels at their noise floor weigh by their noise. The
+Jacobian is by forward differences, every column in one batched rollout.
+
+Comparing two models (likelihood ratio, :func:`log_ratio`):
+``LR = Σ_c n_eff,c ln(mean z²_c,before / mean z²_c,after)`` with the effective sample
+count ``n_eff,c = n_c (1 − ρ_c)/(1 + ρ_c)`` (ρ_c the lag-1 autocorrelation of channel
+c's residual after the fit: a free-run residual is not n independent samples).
+
+Intervals and identifiability (:func:`uncertainty`)
+--------------------------------------------------
+Gauss–Newton covariance ``s² (JᵀJ)⁻¹`` of the weighted problem, inflated by ``n/n_eff``;
+95 % half-widths. Before reporting them, the scaled Fisher matrix is checked: its rank
+and condition number, the correlations between parameters, parameters at a bound and
+parameters whose interval is wider than their own scale. Such parameters are listed as
+not identifiable from this run (their interval is reported as ``inf``), instead of a
+tight local interval the data cannot support.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from . import effects as fx
+from .problem import ReplayProblem
+
+__all__ = [
+    "PARAM_SCALE",
+    "SEEDS",
+    "FitOutcome",
+    "free_params",
+    "params_dict",
+    "fit",
+    "seed_points",
+    "best_start",
+    "log_ratio",
+    "n_eff",
+    "uncertainty",
+]
+
+#: Typical magnitude of each fitted parameter (finite-difference steps and x_scale).
+PARAM_SCALE: Dict[Tuple[str, str], float] = {
+    ("joint_friction", "tau_c"): 1.0,
+    ("joint_friction", "b"): 0.5,
+    ("joint_friction", "tau_s"): 1.0,
+    ("joint_friction", "v_s"): 0.05,
+    ("backlash", "gap"): 0.01,
+    ("higher_bending_modes", "k_scale"): 0.5,
+    ("higher_bending_modes", "e_pa"): 1e8,
+    ("higher_bending_modes", "lambda_s"): 1e-4,
+    ("pressure_leak", "rate"): 0.01,
+    ("wrinkling", "ratio"): 0.3,
+    ("wrinkling", "mw_scale"): 0.3,
+    ("payload_mass", "delta_kg"): 0.3,
+    ("payload_mass", "com_offset_m"): 0.02,
+    ("sensor_delay", "imu"): 0.005,
+    ("sensor_delay", "encoder"): 0.005,
+    ("sensor_delay", "torque"): 0.005,
+    ("sensor_delay", "mocap"): 0.005,
+    ("actuator_saturation", "tau_max"): 2.0,
+    ("air_drag", "cd"): 1.0,
+    ("torsion", "k_t"): 100.0,
+    ("torsion", "c_t"): 0.5,
+}
+
+#: Starting points tried (one batched rollout) before the fit: the effects are not convex
+#: in their parameters (thresholds, dead zones, delays, masses that move a resonance); a
+#: value applies to every joint/link entry of the parameter.
+SEEDS: Dict[str, List[Dict[str, float]]] = {
+    "joint_friction": [{"tau_c": 0.5, "b": 0.1}, {"tau_c": 2.0, "b": 0.5}, {"tau_c": 0.2, "b": 1.0}],
+    "backlash": [{"gap": 0.005}, {"gap": 0.02}, {"gap": 0.05}],
+    "pressure_leak": [{"rate": 0.005}, {"rate": 0.05}],
+    "wrinkling": [{"ratio": r, "mw_scale": m} for r in (0.3, 0.6) for m in (0.4, 0.7, 1.0)],
+    "payload_mass": [{"delta_kg": d} for d in (-1.0, -0.6, -0.3, -0.15, 0.15, 0.3, 0.6, 1.0, 1.5)],
+    "sensor_delay": [{"imu": d, "torque": d, "mocap": d} for d in (0.003, 0.01, 0.02, 0.05)],
+    "air_drag": [{"cd": 1.0}, {"cd": 5.0}, {"cd": 20.0}],
+    "higher_bending_modes": [{"k_scale": 0.5}, {"k_scale": 1.0}, {"k_scale": 2.0}],
+    "torsion": [{"k_t": 30.0, "c_t": 0.1}, {"k_t": 100.0, "c_t": 0.2}, {"k_t": 300.0, "c_t": 0.5}],
+}
+
+_NUDGE = 0.2
+
+
+@dataclass
+class FitOutcome:
+    """A fit of ``free`` entries: values, the full flat vector, residuals (n, C) in noise
+    units, the weighted training Jacobian, channel weights and rollouts used."""
+
+    x: np.ndarray
+    flat: np.ndarray
+    z: np.ndarray
+    J: np.ndarray
+    weights: np.ndarray
+    nfev: int
+    starts: List[np.ndarray] = field(default_factory=list)
+    start_values: List[float] = field(default_factory=list)
+
+
+def free_params(effect: str, only: Optional[Sequence[str]] = None) -> List[Tuple[fx.EffectParam, int]]:
+    """(parameter, entry) pairs fitted for ``effect``: its ``fit`` parameters, or ``only``."""
+    out: List[Tuple[fx.EffectParam, int]] = []
+    for p in fx.EFFECTS[effect].params.values():
+        if (only is None and p.fit) or (only is not None and p.name in only):
+            out.extend((p, i) for i in range(p.length))
+    return out
+
+
+def params_dict(effect: str, flat: np.ndarray) -> Dict[str, List[float]]:
+    """``{param: values}`` of ``effect`` in a flat vector."""
+    return {k: [float(x) for x in flat[p.slice]] for k, p in fx.EFFECTS[effect].params.items()}
+
+
+def _weights(ms: np.ndarray) -> np.ndarray:
+    return 1.0 / np.sqrt(np.maximum(np.where(np.isfinite(ms), ms, 1.0), 1.0))
+
+
+def fit(
+    prob: ReplayProblem,
+    base_flat: np.ndarray,
+    free: List[Tuple[fx.EffectParam, int]],
+    x0: np.ndarray,
+    max_iter: int,
+    *,
+    scale: Optional[np.ndarray] = None,
+    mask: Optional[np.ndarray] = None,
+) -> FitOutcome:
+    """Maximum-likelihood fit of the ``free`` entries (module docs) on the samples of
+    ``mask`` (default: the problem's training samples)."""
+    from scipy.optimize import least_squares
+
+    train = prob.train if mask is None else mask
+    lo = np.array([p.lower for p, _ in free])
+    hi = np.array([p.upper for p, _ in free])
+    sc = np.array([PARAM_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, dtype=float)
+    idx = np.array([p.offset + i for p, i in free], dtype=int)
+    # a start on a bound stalls the trust-region-reflective steps (their scaling is the
+    # distance to the bound): start a fraction of the typical scale inside
+    fin_lo = np.where(np.isfinite(lo), lo, -1e300)
+    fin_hi = np.where(np.isfinite(hi), hi, 1e300)
+    nudge = np.minimum(_NUDGE * sc, 0.5 * (fin_hi - fin_lo))
+    x0 = np.clip(np.asarray(x0, dtype=float), fin_lo + nudge, fin_hi - nudge)
+    cache: Dict[bytes, np.ndarray] = {}
+    n0 = prob.nfev
+
+    def flat_of(x: np.ndarray) -> np.ndarray:
+        f = np.array(base_flat, dtype=float)
+        f[idx] = x
+        return f
+
+    def eval_batch(xs: List[np.ndarray]) -> List[np.ndarray]:
+        todo = [x for x in xs if x.tobytes() not in cache]
+        if todo:
+            z = prob.residuals(prob.simulate(np.array([flat_of(x) for x in todo])))
+            for x, zz in zip(todo, z):
+                cache[x.tobytes()] = zz
+        return [cache[x.tobytes()] for x in xs]
+
+    def vec(z: np.ndarray, w: np.ndarray) -> np.ndarray:
+        r = z[train] * w[None, :]
+        failed = not np.isfinite(z).any()
+        if failed:
+            return np.full(r.size, 1e3)
+        return np.where(np.isfinite(r), r, 0.0).reshape(-1)
+
+    def solve(x_start: np.ndarray, w: np.ndarray, nfev: int) -> np.ndarray:
+        def fun(x: np.ndarray) -> np.ndarray:
+            return vec(eval_batch([np.asarray(x, dtype=float)])[0], w)
+
+        def jac(x: np.ndarray) -> np.ndarray:
+            return _jac(np.asarray(x, dtype=float), w)
+
+        sol = least_squares(fun, x_start, jac=jac, bounds=(lo, hi), x_scale=sc, method="trf", max_nfev=nfev, xtol=1e-6, ftol=1e-6, gtol=1e-8)
+        return np.asarray(sol.x, dtype=float)
+
+    def _jac(x: np.ndarray, w: np.ndarray) -> np.ndarray:
+        pts, hs = [], []
+        for j in range(len(x)):
+            h = 1e-4 * max(sc[j], abs(x[j]) * 0.1)
+            if x[j] + h > hi[j]:
+                h = -h
+            xp = x.copy()
+            xp[j] += h
+            pts.append(xp)
+            hs.append(h)
+        z0, *zs = eval_batch([x] + pts)
+        r0 = vec(z0, w)
+        J = np.empty((r0.size, len(x)))
+        for j, (zj, h) in enumerate(zip(zs, hs)):
+            J[:, j] = (vec(zj, w) - r0) / h
+        return J
+
+    ms0, _, _ = prob.channel_stats(eval_batch([x0])[0], train)
+    w = _weights(ms0)
+    x = solve(x0, w, max_iter)
+    ms1, _, _ = prob.channel_stats(eval_batch([x])[0], train)
+    w1 = _weights(ms1)
+    if np.all(np.isfinite(ms1)) and np.any(np.abs(np.log(w1 / w)) > math.log(2.0)):
+        w = w1
+        x = solve(x, w, max(5, max_iter // 2))
+    z = eval_batch([x])[0]
+    ms, _, _ = prob.channel_stats(z, train)
+    w = _weights(ms)
+    return FitOutcome(x=x, flat=flat_of(x), z=z, J=_jac(x, w), weights=w, nfev=prob.nfev - n0)
+
+
+def seed_points(effect: str, free: List[Tuple[fx.EffectParam, int]], x0: np.ndarray, extra: Optional[List[Dict[str, float]]] = None) -> List[np.ndarray]:
+    """``x0`` and the effect's :data:`SEEDS` (plus ``extra``) as start vectors."""
+    cands = [np.asarray(x0, dtype=float)]
+    for seed in list(SEEDS.get(effect, [])) + list(extra or []):
+        x = cands[0].copy()
+        for j, (p, _) in enumerate(free):
+            if p.name in seed:
+                x[j] = min(max(seed[p.name], p.lower), p.upper)
+        cands.append(x)
+    return cands
+
+
+def best_start(prob: ReplayProblem, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, cands: List[np.ndarray]) -> Tuple[np.ndarray, List[float]]:
+    """The candidate start with the highest training likelihood (one batched rollout),
+    and every candidate's ``Σ_c n_c ln mean z²`` (lower is better; inf for a failed run)."""
+    if len(cands) == 1:
+        return cands[0], [math.nan]
+    idx = np.array([p.offset + i for p, i in free], dtype=int)
+    flats = np.repeat(np.asarray(flat, dtype=float)[None], len(cands), axis=0)
+    flats[:, idx] = np.array(cands)
+    z = prob.residuals(prob.simulate(flats))
+    vals = []
+    for zz in z:
+        ms, n, _ = prob.channel_stats(zz, prob.train)
+        vals.append(float(np.sum(n * np.log(np.maximum(ms, 1e-300)))) if np.all(np.isfinite(ms)) else math.inf)
+    return cands[int(np.argmin(vals))], vals
+
+
+def n_eff(n: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """Effective sample counts ``n (1 − ρ)/(1 + ρ)`` (ρ clipped to [0, 0.999])."""
+    r = np.clip(np.nan_to_num(rho, nan=0.0), 0.0, 0.999)
+    return n * (1.0 - r) / (1.0 + r)
+
+
+def log_ratio(prob: ReplayProblem, z_before: np.ndarray, z_after: np.ndarray, mask: np.ndarray) -> Tuple[float, float]:
+    """Likelihood ratio statistic ``Σ_c n_eff,c ln(ms_before/ms_after)`` on ``mask`` and the
+    total effective sample count (module docs)."""
+    ms0, _, _ = prob.channel_stats(z_before, mask)
+    ms1, n, rho = prob.channel_stats(z_after, mask)
+    if not (np.all(np.isfinite(ms0)) and np.all(np.isfinite(ms1))):
+        return -math.inf, float(np.sum(n))
+    ne = n_eff(n, rho)
+    lr = float(np.sum(ne * np.log(np.maximum(ms0, 1e-300) / np.maximum(ms1, 1e-300))))
+    return lr, max(float(np.sum(ne)), 1.0)
+
+
+def uncertainty(
+    outcome: FitOutcome,
+    free: List[Tuple[fx.EffectParam, int]],
+    names: Sequence[str],
+    neff: float,
+    scale: Optional[np.ndarray] = None,
+) -> Tuple[np.ndarray, Dict[str, Any]]:
+    """95 % half-widths (``inf`` for parameters the run cannot pin down) and the
+    identifiability report: ``rank``, ``condition``, ``correlated`` (pairs with
+    |ρ| > 0.95), ``at_bound``, ``unidentifiable`` (names) and ``text``."""
+    J = outcome.J
+    k = J.shape[1]
+    n = J.shape[0]
+    sc = np.array([PARAM_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, float)
+    s2 = 1.0  # the weights make the training residual's variance 1 per channel
+    inflate = max(n / max(neff, 1.0), 1.0)
+    Js = J * sc[None, :]
+    F = Js.T @ Js
+    sv = np.linalg.svd(Js, compute_uv=False) if k else np.zeros(0)
+    tol = (sv[0] if sv.size else 0.0) * max(Js.shape) * np.finfo(float).eps * 1e4
+    rank = int(np.sum(sv > tol)) if sv.size else 0
+    cond = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else math.inf
+    try:
+        cov_s = np.linalg.pinv(F) * s2 * inflate
+    except np.linalg.LinAlgError:
+        cov_s = np.full((k, k), np.inf)
+    var = np.clip(np.diag(cov_s), 0.0, None)
+    half = 1.96 * np.sqrt(var) * sc
+    d = np.sqrt(np.where(var > 0, var, np.nan))
+    corr = cov_s / np.outer(d, d)
+    lo = np.array([p.lower for p, _ in free])
+    hi = np.array([p.upper for p, _ in free])
+    x = outcome.x
+    at_bound = [names[j] for j in range(k) if (np.isfinite(lo[j]) and abs(x[j] - lo[j]) <= 1e-3 * sc[j]) or (np.isfinite(hi[j]) and abs(hi[j] - x[j]) <= 1e-3 * sc[j])]
+    col = np.linalg.norm(Js, axis=0)
+    bad = set()
+    for j in range(k):
+        if not col[j] > 1e-9 * max(float(np.max(col)) if k else 0.0, 1e-300):
+            bad.add(j)  # the run does not see this parameter at all
+        elif half[j] > max(abs(x[j]), sc[j]) * 2.0:
+            bad.add(j)
+    pairs = []
+    for a in range(k):
+        for b in range(a + 1, k):
+            c = corr[a, b]
+            if np.isfinite(c) and abs(c) > 0.95:
+                pairs.append((names[a], names[b], float(c)))
+                if abs(c) > 0.995:
+                    bad.update((a, b))
+    if rank < k:
+        # the weakest directions of a rank-deficient problem
+        _, _, vt = np.linalg.svd(Js, full_matrices=False)
+        for v in vt[rank:]:
+            bad.add(int(np.argmax(np.abs(v))))
+    half = np.array([math.inf if j in bad else float(h) for j, h in enumerate(half)])
+    unident = [names[j] for j in sorted(bad)]
+    parts = []
+    if unident:
+        parts.append(f"not identifiable from this run: {', '.join(unident)}")
+    if pairs:
+        parts.append("strongly correlated: " + ", ".join(f"{a}~{b} ({c:+.3f})" for a, b, c in pairs))
+    if at_bound:
+        parts.append(f"at a bound: {', '.join(at_bound)}")
+    info = {
+        "rank": rank,
+        "n_params": k,
+        "condition": cond,
+        "correlated": [list(p) for p in pairs],
+        "at_bound": at_bound,
+        "unidentifiable": unident,
+        "text": "; ".join(parts) if parts else f"all {k} parameter(s) identifiable (rank {rank}, condition {cond:.3g})",
+    }
+    return half, info

@@ -1,0 +1,505 @@
+"""One measured run replayed in one model: the problem that :func:`popup.compare.compare`,
+:func:`popup.diagnose`, :func:`popup.improve` and :func:`popup.fit_params` share.
+
+::
+
+    prob = popup.ReplayProblem(model, run)       # channels, rate, encoder, nominal replay, noise
+    prob.noise                                   # {channel: σ} white-noise floor per channel
+    prob.error()                                 # systematic error of the model [noise units]
+    z = prob.residuals(prob.simulate(flats))     # (B, n, C) residuals in noise units
+
+What it holds (set up once, reused by every fit):
+
+* **Channels** (:func:`select_channels`): every measured output the model predicts,
+  except the replay inputs ``q1..3``/``dq1..3`` and pressures that do not vary.
+* **Output rate**: the coarsest multiple of ``dt`` at least the run's mean rate; every
+  step (``1/dt``) when the measured stamps are not on that grid (jitter), so that the
+  linear interpolation onto the stamps stays far below the noise.
+* **Encoder** (encoder replay): the measured angles smoothed by
+  :func:`popup.smoothing.smooth_encoder` (a quantised or noisy encoder interpolated as is
+  makes q̈, and so the torques, noisy: the replay would sit above the noise floor).
+* **Noise floor** σ_c of each channel (:func:`popup.noise.noise_std` of the nominal
+  model's residual: divided differences remove the smooth systematic part).
+* **Training and validation samples**: the run cut in :data:`N_BLOCKS` equal time
+  blocks; blocks :data:`VALIDATION_BLOCKS` are held out (30 %, spread over the run so
+  that they see every kind of excitation). Fits use the training samples; an effect is
+  confirmed on the held-out ones.
+
+The error (:data:`ERROR_DEFINITION`)
+------------------------------------
+With ``z_c = (ŷ_c − y_c)/σ_c`` the residual of channel c in units of its noise, the
+*noise multiple* of channel c is ``r_c = sqrt(mean z_c²)`` (1 = at the noise floor) and
+the model's error is the systematic part ``S = sqrt(max(mean_c r_c² − 1, 0))`` in noise
+units (0 = everything left is noise). A channel whose measured signal is at its noise
+floor has ``r_c ≈ 1`` whatever the model does and adds nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .exceptions import InputError, MeasuredRunError, StepTooLargeError
+from .io import MeasuredRun
+from .noise import noise_std
+from .results import CHANNELS
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .model import Model
+
+__all__ = [
+    "ReplayProblem",
+    "select_channels",
+    "initial_state",
+    "reference_setup",
+    "output_rate",
+    "ERROR_DEFINITION",
+    "N_BLOCKS",
+    "VALIDATION_BLOCKS",
+    "DEFAULT_CHANNELS",
+    "Shifted",
+]
+
+ERROR_DEFINITION = (
+    "systematic error in units of the noise: S = sqrt(max(mean_c r_c^2 - 1, 0)) over the compared channels c, "
+    "where r_c = RMSE_c/sigma_c is channel c's free-run replay error as a multiple of its white-noise floor sigma_c "
+    "(estimated from the data by 4th divided differences of the nominal residual); 0 = at the noise floor"
+)
+N_BLOCKS = 10
+"""Equal time blocks the run is cut into for training/validation."""
+VALIDATION_BLOCKS: Tuple[int, ...] = (1, 4, 7)
+"""Blocks (0-based) held out for validation."""
+
+DEFAULT_CHANNELS: Tuple[str, ...] = (
+    "tau1", "tau2", "tau3", "ee_x", "ee_y", "ee_z",
+    "imu1_ax", "imu1_ay", "imu1_az", "imu2_ax", "imu2_ay", "imu2_az",
+)
+"""The channels compared by default in an encoder replay (when the run has them)."""
+
+INPUTS_ENCODER = ("q1", "q2", "q3")
+DERIVED = ("dq1", "dq2", "dq3")
+PRESSURES = ("p1", "p2")
+#: A channel whose measured standard deviation is below this multiple of its noise floor
+#: carries no signal the model could explain.
+FLOOR_SIGNAL_RATIO = 1.5
+
+
+# ---------------------------------------------------------------------------- setup
+
+
+def select_channels(run: MeasuredRun, channels: Optional[Sequence[str]], where: str, notes: List[str], closed: bool = False) -> List[str]:
+    """The channels to compare (module docs); ``notes`` says what was left out and why."""
+    have = [c for c in run.columns if c in CHANNELS and c != "t"]
+    if channels is not None:
+        chans = [str(c) for c in channels]
+        bad = [c for c in chans if c not in have]
+        if bad:
+            raise MeasuredRunError(
+                f"{where}: cannot compare {bad}: a channel must be both measured and simulated; "
+                f"comparable channels of this run: {have or 'none'} (run columns: {run.columns})"
+            )
+        if not chans:
+            raise MeasuredRunError(f"{where}: channels=[] selects nothing to compare; comparable: {have}")
+        for c in chans:
+            if closed:
+                continue
+            if c in INPUTS_ENCODER:
+                notes.append(f"{c} is an input of the encoder replay: it matches by construction (up to the smoothing)")
+            if c in DERIVED:
+                notes.append(f"{c}: the simulated rate is the derivative of the encoder spline, not an independent prediction")
+        return chans
+    chans = []
+    skipped = []
+    for c in have:
+        if not closed and (c in INPUTS_ENCODER or c in DERIVED):
+            skipped.append(c)
+            continue
+        y = run.channel(c)
+        if not np.any(np.isfinite(y)):
+            notes.append(f"{c}: every measured sample is missing; not compared")
+            continue
+        if c in PRESSURES:
+            yy = y[np.isfinite(y)]
+            if yy.size < 2 or float(np.max(yy) - np.min(yy)) == 0.0:
+                skipped.append(c)
+                continue
+        chans.append(c)
+    if skipped:
+        notes.append(f"not compared by default: {', '.join(skipped)} (replay inputs, spline derivatives or constant pressures)")
+    if not chans:
+        raise MeasuredRunError(
+            f"{where}: nothing to compare: the run has no measured output the model predicts "
+            f"(run columns: {', '.join(run.columns)}; comparable outputs are {', '.join(DEFAULT_CHANNELS)}"
+            f", and p1/p2 when they vary)"
+        )
+    return chans
+
+
+def initial_state(model: "Model", run: MeasuredRun, q0: np.ndarray, notes: List[str]) -> Tuple[Any, Any]:
+    """The replay's initial chain state ``(q, v)`` from the run's ``[initial]`` table, or
+    ``(None, None)`` (at rest: bending joints in static equilibrium at ``q0``)."""
+    ini = run.initial
+    if not ini:
+        notes.append("the run starts at rest: bending joints in static equilibrium at the first encoder sample")
+        return None, None
+    names = ["d11", "d12", "d21", "d22"]
+    rates = ["dd11", "dd12", "dd21", "dd22"]
+    d = ini.get("bending")
+    dd = ini.get("bending_rate")
+    if d is None and any(n in ini for n in names):
+        d = [float(ini.get(n, math.nan)) for n in names]
+    if dd is None and any(n in ini for n in rates):
+        dd = [float(ini.get(n, 0.0)) for n in rates]
+    jn = model.joint_names
+    if d is None or len(d) != 4 or not all(n in jn for n in names):
+        notes.append(f"[initial] table {sorted(ini)} not understood (expected d11 d12 d21 d22 [rad] and dd11.. [rad/s]); the run starts at rest")
+        return None, None
+    q = model.rest_state([float(x) for x in q0])
+    v = np.zeros(len(jn))
+    locked = set(model.core.locked_index)
+    for n, x in zip(names, d):
+        if np.isfinite(float(x)) and jn.index(n) not in locked:
+            q[jn.index(n)] = float(x)
+    if dd is not None:
+        for n, x in zip(rates, dd):
+            if jn.index(n) not in locked:
+                v[jn.index(n)] = float(x)
+    notes.append("initial bending angles and rates from the run's [initial] table" + (" (a rigid link's stay 0)" if locked else ""))
+    return q, v
+
+
+def reference_setup(run: MeasuredRun) -> Tuple[Any, np.ndarray, float, float]:
+    """The closed-loop replay of a ``replay = "reference"`` run: ``(task, q0 [rad], t0 [s],
+    duration [s])``. The task is one phase tracking the measured references (linear
+    interpolation) with the controller of the run's ``[controller]`` table; the run starts at
+    rest at the first encoder sample (the first reference sample when q1..q3 are absent)."""
+    from .control import Controller, Phase, Task, samples
+
+    t_ref, q_ref = run.reference()
+    where = str(run.source)
+    ctl = dict(run.controller or {})
+    try:
+        controller = Controller(**ctl)
+    except TypeError as e:
+        raise MeasuredRunError(f"{where}: [controller] table: {e} (keys: rate_hz, gains, motor, motors, damping, damping_lpf_rad_s, v_max, anti_windup)") from None
+    t0 = float(t_ref[0])
+    task = Task([Phase("moving", name="Replay", track=[samples(t_ref - t0, q_ref[:, j]) for j in range(3)], until={"max_time": math.inf})], controller, faults={"wrinkle": "continue"})
+    q0 = q_ref[0]
+    if all(c in run.columns for c in ("q1", "q2", "q3")):
+        q = np.column_stack([run.channel(c) for c in ("q1", "q2", "q3")])
+        ok = np.all(np.isfinite(q), axis=1)
+        if ok.any():
+            q0 = q[int(np.argmax(ok))]
+    return task, np.asarray(q0, dtype=np.float64), t0, float(t_ref[-1] - t0)
+
+
+def output_rate(dt: float, t_in: np.ndarray, t_meas: np.ndarray, sample_rate: Optional[float], notes: List[str]) -> float:
+    """The simulation's output rate [Hz] (module docs): ``sample_rate`` if given, else the
+    coarsest multiple of ``dt`` at least the run's mean rate, or every step when the
+    measured stamps are off that grid."""
+    span = float(t_in[-1] - t_in[0])
+    mean_dt = span / (len(t_in) - 1)
+    if sample_rate is not None:
+        sr = float(sample_rate)
+        notes.append(f"simulated at {sr:.6g} Hz (sample_rate given; the run's mean rate is {1.0 / mean_dt:.6g} Hz)")
+        return sr
+    k = max(1, int(math.floor(mean_dt / dt * (1.0 + 1e-9))))
+    if mean_dt < dt * (1.0 - 1e-9):
+        notes.append(f"the run ({1.0 / mean_dt:.6g} Hz) is sampled faster than the model step allows; simulated at 1/dt = {1.0 / dt:.6g} Hz")
+        return 1.0 / dt
+    grid = t_in[0] + np.round((t_meas - t_in[0]) / (k * dt)) * (k * dt)
+    if k > 1 and np.max(np.abs(grid - t_meas)) > 1e-9 * max(1.0, float(np.max(np.abs(t_meas)))):
+        notes.append(f"the measured stamps are not on a {1.0 / (k * dt):.6g} Hz grid (jitter): simulated at every step (1/dt = {1.0 / dt:.6g} Hz) and interpolated")
+        return 1.0 / dt
+    sr = 1.0 / (k * dt)
+    notes.append(f"simulated at {sr:.6g} Hz (output every {k} step(s) of dt = {dt:g} s; the run's mean rate is {1.0 / mean_dt:.6g} Hz)")
+    return sr
+
+
+# ---------------------------------------------------------------------------- problem
+
+
+class Shifted:
+    """A closed-loop result (time from 0) seen on the run's clock (time from ``t0``)."""
+
+    def __init__(self, res: Any, t0: float) -> None:
+        self.res = res
+        self.t0 = float(t0)
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.res.time + self.t0
+
+    def channel(self, name: str) -> np.ndarray:
+        return self.time if name == "t" else self.res.channel(name)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.res, name)
+
+
+
+
+class ReplayProblem:
+    """One measured run replayed in one model (module docs).
+
+    Parameters
+    ----------
+    model : Model
+    run : MeasuredRun
+    channels : channels to compare (default: :func:`select_channels`).
+    sample_rate : simulation output rate [Hz] (default: :func:`output_rate`).
+    threads : rollout threads (0 = every core).
+    smooth : smooth the encoder angles (encoder replay; default True).
+
+    Attributes
+    ----------
+    channels : list of str
+    time : (n,) measured stamps [s]
+    measured : (n, C) measured channels (NaN where missing)
+    noise : dict, channel → σ (channel unit)
+    at_floor : list of channels whose measured signal is at its noise floor
+    train, validation : (n,) boolean masks
+    notes : what was done (rates, smoothing, channels)
+    """
+
+    def __init__(
+        self,
+        model: "Model",
+        run: MeasuredRun,
+        *,
+        channels: Optional[Sequence[str]] = None,
+        sample_rate: Optional[float] = None,
+        threads: int = 0,
+        smooth: bool = True,
+        _parent: Optional["ReplayProblem"] = None,
+    ) -> None:
+        if not isinstance(run, MeasuredRun):
+            raise InputError(f"input run: expected a popup.MeasuredRun (popup.read_run), got {type(run).__name__}")
+        self.model = model
+        self.run = run
+        self.threads = int(threads)
+        self.nfev = 0
+        self.where = str(run.data_file if run.data_file is not None else run.source)
+        if run.replay not in ("encoder", "reference"):
+            raise MeasuredRunError(f"{self.where}: unknown replay mode {run.replay!r}; expected \"encoder\" or \"reference\"")
+        self.closed = run.replay == "reference"
+        if _parent is not None:
+            p = _parent
+            self.notes = list(p.notes)
+            self.channels = list(p.channels)
+            self.time, self.measured = p.time, p.measured
+            self.t_enc, self.q_enc, self.q_enc_raw, self.smoothing = p.t_enc, p.q_enc, p.q_enc_raw, p.smoothing
+            self.train, self.validation = p.train, p.validation
+            self.sample_rate = p.sample_rate
+            self.iq, self.iv = p.iq, p.iv
+            self.task, self.q0, self.t0, self.duration = p.task, p.q0, p.t0, p.duration
+            self.sigma = p.sigma
+            self._nominal: Optional[Tuple[np.ndarray, Any]] = None
+            return
+        notes: List[str] = []
+        self.notes = notes
+        self.channels = select_channels(run, channels, self.where, notes, self.closed)
+        self.time = np.asarray(run.time, dtype=np.float64)
+        self.measured = np.column_stack([np.asarray(run.channel(c), dtype=np.float64) for c in self.channels])
+        self.task: Any = None
+        self.q0: Any = None
+        self.t0 = 0.0
+        self.duration = 0.0
+        self.iq: Any = None
+        self.iv: Any = None
+        self.smoothing: Any = None
+        if self.closed:
+            self.t_enc, self.q_enc = run.reference()
+            self.q_enc_raw = self.q_enc
+            self.task, self.q0, self.t0, self.duration = reference_setup(run)
+        else:
+            self.t_enc, self.q_enc_raw = run.encoder()
+            self.q_enc = self.q_enc_raw
+            n_skip = len(self.time) - len(self.t_enc)
+            if n_skip:
+                notes.append(f"encoder replay: {n_skip} row(s) with a missing q1..3 skipped (interpolated over)")
+            if smooth:
+                self.smoothing = _smooth(self.t_enc, self.q_enc_raw)
+                if self.smoothing is not None:
+                    self.q_enc = self.smoothing.q
+                    notes.append(f"encoder: {self.smoothing.method}")
+            self.iq, self.iv = initial_state(model, run, self.q_enc[0], notes)
+        self.sample_rate = output_rate(model.dt, self.t_enc, self.time, sample_rate, notes)
+        self.train, self.validation = _split(self.time)
+        self._nominal = None
+        # noise floor from the nominal residual (its smooth systematic part is removed by the differences)
+        z = self.nominal_simulation() - self.measured
+        self.sigma = np.array([_floor_of(self.time, z[:, j], self.measured[:, j]) for j in range(len(self.channels))])
+        lost = [c for c, s in zip(self.channels, self.sigma) if not s > 0]
+        if lost:
+            raise MeasuredRunError(f"{self.where}: cannot estimate the noise floor of {lost} (constant or too few samples); leave them out with channels=")
+
+    # ------------------------------------------------------------------ derived problems
+    def with_model(self, model: "Model") -> "ReplayProblem":
+        """The same run, channels, encoder, noise floor and split in another model (a
+        candidate structure, a smaller step); the output rate must be a multiple of its ``dt``."""
+        return ReplayProblem(model, self.run, threads=self.threads, _parent=self)
+
+    def with_initial_state(self, q: Any, v: Any) -> "ReplayProblem":
+        """The same problem started from chain coordinates ``q`` and rates ``v`` (nv,)."""
+        p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
+        p.iq, p.iv = q, v
+        return p
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def noise(self) -> Dict[str, float]:
+        """White-noise floor σ per channel (channel unit)."""
+        return {c: float(s) for c, s in zip(self.channels, self.sigma)}
+
+    @property
+    def at_floor(self) -> List[str]:
+        """Channels whose measured signal is at its noise floor (std < 1.5 σ)."""
+        out = []
+        for j, c in enumerate(self.channels):
+            y = self.measured[:, j]
+            if float(np.nanstd(y)) < FLOOR_SIGNAL_RATIO * self.sigma[j]:
+                out.append(c)
+        return out
+
+    # ------------------------------------------------------------------ simulation
+    def simulate(self, flats: np.ndarray, model: Optional["Model"] = None, *, full: bool = False) -> Any:
+        """Simulated channels on the measured stamps, (B, n, C), NaN where a run failed
+        or outside the simulated span; ``full``: also the raw batch result."""
+        m = self.model if model is None else model
+        flats = np.atleast_2d(np.asarray(flats, dtype=np.float64))
+        B = flats.shape[0]
+        res: Any
+        if self.closed:
+            res = m.rollout_task(self.task, duration=self.duration, q0=self.q0, sample_rate=self.sample_rate,
+                                 threads=self.threads, effects=flats, raise_on_error=False)
+            ok = np.array([e is None and st == "completed" for e, st in zip(res.errors, res.status)])
+            t0 = self.t0
+        else:
+            try:
+                res = m.rollout(encoder_t=self.t_enc, encoder_q=self.q_enc, initial_q=self.iq, initial_v=self.iv,
+                                sample_rate=self.sample_rate, threads=self.threads, effects=flats, raise_on_error=False)
+            except StepTooLargeError:
+                # the batch's step check refused one of its jobs: run them one by one, so
+                # that only the unstable ones fail
+                if B > 1:
+                    return self._one_by_one(flats, m, full)
+                self.nfev += 1
+                out = np.full((1, len(self.time), len(self.channels)), np.nan)
+                return (out, None) if full else out
+            ok = np.asarray(res.ok)
+            t0 = 0.0
+        self.nfev += B
+        out = np.full((B, len(self.time), len(self.channels)), np.nan)
+        if ok.any():
+            t_sim = res.time[int(np.argmax(ok))] + t0
+            same = len(t_sim) == len(self.time) and np.array_equal(t_sim, self.time)
+            inside = (self.time >= t_sim[0] - 1e-12) & (self.time <= t_sim[-1] + 1e-12)
+            for j, c in enumerate(self.channels):
+                y = res.channel(c)
+                for b in range(B):
+                    if not ok[b]:
+                        continue
+                    out[b, :, j] = y[b] if same else np.where(inside, np.interp(self.time, t_sim, y[b]), np.nan)
+        return (out, res) if full else out
+
+    def _one_by_one(self, flats: np.ndarray, m: "Model", full: bool) -> Any:
+        out = np.full((flats.shape[0], len(self.time), len(self.channels)), np.nan)
+        res = None
+        for b in range(flats.shape[0]):
+            sims, res_b = self.simulate(flats[b : b + 1], m, full=True)
+            out[b] = sims[0]
+            res = res_b if res_b is not None else res
+        return (out, res) if full else out
+
+    def nominal_simulation(self) -> np.ndarray:
+        """(n, C) the model as given, simulated once (:meth:`nominal_result`) and kept."""
+        if self._nominal is None:
+            m = self.model
+            if self.closed:
+                res: Any = Shifted(m.run_task(self.task, duration=self.duration, q0=self.q0.tolist(), sample_rate=self.sample_rate), self.t0)
+            else:
+                res = m.replay(self.t_enc, self.q_enc, sample_rate=self.sample_rate, initial_q=self.iq, initial_v=self.iv)
+            self.nfev += 1
+            t_sim = res.time
+            same = len(t_sim) == len(self.time) and np.array_equal(t_sim, self.time)
+            inside = (self.time >= t_sim[0] - 1e-12) & (self.time <= t_sim[-1] + 1e-12)
+            out = np.full((len(self.time), len(self.channels)), np.nan)
+            for j, c in enumerate(self.channels):
+                y = res.channel(c)
+                out[:, j] = y if same else np.where(inside, np.interp(self.time, t_sim, y), np.nan)
+            self._nominal = (out, res)
+        return self._nominal[0]
+
+    def nominal_result(self) -> Any:
+        """The nominal replay's full result (a :class:`~popup.SimResult`, or the closed-loop
+        result on the run's clock)."""
+        self.nominal_simulation()
+        assert self._nominal is not None
+        return self._nominal[1]
+
+    # ------------------------------------------------------------------ residuals and errors
+    def residuals(self, sims: np.ndarray) -> np.ndarray:
+        """Residuals in noise units ``(ŷ − y)/σ``, same shape as ``sims``; NaN where a side
+        is missing; a failed run is NaN everywhere."""
+        return (np.asarray(sims) - self.measured) / self.sigma
+
+    def channel_stats(self, z: np.ndarray, mask: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per channel over ``mask`` (default every sample): mean z² (= r_c²), the number of
+        finite samples and the lag-1 autocorrelation of the residual."""
+        z = np.asarray(z)
+        if mask is not None:
+            z = z[mask]
+        C = z.shape[1]
+        ms, n, rho = np.full(C, np.nan), np.zeros(C), np.zeros(C)
+        for j in range(C):
+            x = z[:, j]
+            x = x[np.isfinite(x)]
+            n[j] = x.size
+            if x.size == 0:
+                continue
+            ms[j] = float(np.mean(x * x))
+            if x.size > 2:
+                xc = x - x.mean()
+                d = float(np.dot(xc, xc))
+                rho[j] = float(np.dot(xc[1:], xc[:-1]) / d) if d > 0 else 0.0
+        return ms, n, rho
+
+    def error(self, z: Optional[np.ndarray] = None, mask: Optional[np.ndarray] = None) -> Tuple[float, Dict[str, float]]:
+        """The systematic error S (:data:`ERROR_DEFINITION`) and each channel's noise
+        multiple r_c, of residual ``z`` (n, C) (default: the model as given)."""
+        if z is None:
+            z = self.residuals(self.nominal_simulation())
+        ms, n, _ = self.channel_stats(z, mask)
+        if not np.all(np.isfinite(ms)):
+            return math.inf, {c: math.inf for c in self.channels}
+        return systematic(ms), {c: float(math.sqrt(m)) for c, m in zip(self.channels, ms)}
+
+
+def systematic(ms: np.ndarray) -> float:
+    """S = sqrt(max(mean_c r_c² − 1, 0)) from the per-channel mean squares r_c²."""
+    return float(math.sqrt(max(float(np.mean(ms)) - 1.0, 0.0)))
+
+
+def _floor_of(t: np.ndarray, resid: np.ndarray, y: np.ndarray) -> float:
+    s = noise_std(t, resid)
+    if not (math.isfinite(s) and s > 0):
+        s = noise_std(t, y)
+    return s if math.isfinite(s) else 0.0
+
+
+def _split(t: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    edges = np.linspace(t[0], t[-1], N_BLOCKS + 1)
+    b = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, N_BLOCKS - 1)
+    val = np.isin(b, VALIDATION_BLOCKS)
+    return ~val, val
+
+
+def _smooth(t: np.ndarray, q: np.ndarray) -> Any:
+    try:
+        from .smoothing import smooth_encoder
+    except ImportError:  # pragma: no cover - the module lands with the smoothing work
+        return None
+    return smooth_encoder(t, q)
