@@ -32,11 +32,19 @@ def test_json_contract(cli_json):
     d, _ = cli_json
     assert d["run"] == str(RUN)
     assert isinstance(d["nominal_error"], float) and d["nominal_error"] > 0
-    assert "NRMSE" in d["error_definition"]
+    assert "noise" in d["error_definition"]
+    assert d["complete"] is True and "error" not in d
     names = [s["effect"] for s in d["suspects"]]
     assert sorted(names) == sorted(FAST.split(","))
     for s in d["suspects"]:
-        assert set(s) >= {"effect", "significant", "score", "params", "error_after"}
+        assert set(s) >= {"effect", "significant", "score", "params", "ci95", "error_after", "tested", "message"}
+        assert s["tested"] is True
+    # the noise floor of every compared channel, close to the generator's (make_example_run.py)
+    assert d["noise"]["tau1"] == pytest.approx(0.05, rel=0.2) and d["noise"]["imu2_az"] == pytest.approx(0.02, rel=0.2)
+    assert set(d["channels"]) == set(d["noise"])
+    # the conclusion tells the history in order: the payload first, with its value
+    assert d["conclusion"].startswith("Added payload_mass (delta_kg=0.3")
+    assert d["conclusion"].index("payload_mass") < d["conclusion"].index("joint_friction")
     # the bundled run hides a heavier payload and friction: both are found, in two rounds
     hist = d["history"]
     assert hist[0] == {**hist[0], "effects": [], "error": d["nominal_error"]}
@@ -93,7 +101,7 @@ def test_rollout_count_is_the_number_of_simulations_run(monkeypatch):
         counted.append(len(res))
         return res
 
-    monkeypatch.setattr(popup.Model, "rollout", counting)
+    monkeypatch.setattr(popup.Model, "rollout", counting)  # Model.replay is a rollout of one
     d = popup.diagnose(model, run, effects=["payload_mass", "higher_bending_modes"])
     assert d.n_rollouts == sum(counted)
     assert [s.n_rollouts for s in d.suspects] and all(s.n_rollouts > 2 for s in d.suspects)

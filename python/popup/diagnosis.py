@@ -114,8 +114,8 @@ _STRUCTURE: Dict[str, Dict[str, Any]] = {
     "torsion": {"k_t": [200.0, 200.0]},
 }
 _STIFFEST: Dict[str, Dict[str, Any]] = {
-    "higher_bending_modes": {"k_scale": [2.0, 2.0]},
-    "torsion": {"k_t": [400.0, 400.0], "c_t": [0.5, 0.5]},
+    "higher_bending_modes": {"k_scale": [5.0, 5.0]},
+    "torsion": {"k_t": [1000.0, 1000.0], "c_t": [2.0, 2.0]},
 }
 
 VARIANTS: Dict[str, List[Dict[str, Any]]] = {
@@ -588,11 +588,10 @@ def _step_for(prob: ReplayProblem, m: "Model", check: "Model") -> float:
     largest divisor of the output period within ``STABILITY_MARGIN`` of the stability
     limit of ``check`` (the candidate at its stiffest seed)."""
     q = check.rest_state(list(prob.q_enc[0] if not prob.closed else prob.q0))
-    sdt = check.stable_dt(q, replay=not prob.closed)
-    if sdt >= m.dt * (1 - 1e-12) and sdt > m.dt / STABILITY_MARGIN * (1 - 1e-12):
+    # stable_dt returns the model's own dt when that is stable: ask with a huge step to get the limit
+    sdt = check.with_dt(1.0).stable_dt(q, replay=not prob.closed)
+    if STABILITY_MARGIN * sdt >= m.dt * (1 - 1e-12):
         return m.dt
-    if sdt >= m.dt * (1 - 1e-12):
-        sdt = m.dt  # stable, but without the margin: shrink from the model's own step
     period = 1.0 / prob.sample_rate
     k = max(1, int(math.ceil(period / (STABILITY_MARGIN * sdt) - 1e-9)))
     return period / k
@@ -691,7 +690,7 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
                 best = vf
             else:
                 notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f})")
-    return best.suspect(ev, prob.nfev - n0 + (best.prob.nfev if best.prob is not prob else 0), "; ".join(notes))
+    return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
 
 
 # ---------------------------------------------------------------------------- API
@@ -730,12 +729,13 @@ def diagnose(
     names = list(fx.EFFECT_NAMES if effects is None else effects)
     for n in names:
         fx.normalize(n, {})
+    given = problem is not None
     if problem is None:
         problem = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads)
     elif problem.model is not model:
         raise InputError("diagnose: problem= must be a ReplayProblem of this model (ReplayProblem.with_model)")
     prob = problem
-    n_start = prob.nfev
+    n_start = prob.nfev if given else 0
     cmp = compare(model, run, problem=prob)
     e0, per0 = prob.error()
     have = set(fx.active(model.effects_flat))
@@ -826,6 +826,10 @@ def improve(
     Nothing is lost: a failure in round k returns rounds 1..k−1 with ``History.error``
     set. Errors in the set-up (a run the model cannot replay at all) are raised."""
     t_start = time.perf_counter()
+    for n in effects or []:
+        fx.normalize(n, {})  # bad input is refused before any work
+    if int(max_rounds) < 0:
+        raise InputError(f"input max_rounds: {max_rounds} must be ≥ 0")
     prob = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads)
     e0, per0 = prob.error()
     steps = [HistoryStep([], {}, e0, per0, model, validation_error=prob.error(mask=prob.validation)[0])]

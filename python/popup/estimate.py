@@ -31,6 +31,7 @@ tight local interval the data cannot support.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
@@ -43,6 +44,7 @@ from .problem import ReplayProblem
 __all__ = [
     "PARAM_SCALE",
     "SEEDS",
+    "BOUNDS",
     "FitOutcome",
     "free_params",
     "params_dict",
@@ -94,6 +96,16 @@ SEEDS: Dict[str, List[Dict[str, float]]] = {
     "torsion": [{"k_t": 30.0, "c_t": 0.1}, {"k_t": 100.0, "c_t": 0.2}, {"k_t": 300.0, "c_t": 0.5}],
 }
 
+#: Bounds the diagnosis fits within where they are narrower than the registry's: the
+#: physically plausible range of a parameter whose registry range reaches far into
+#: configurations that need a much smaller step (a torsional damper of 10⁴ N·m·s/rad is an
+#: overdamped, stiff mode; the diagnosis would spend its time on it).
+BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
+    ("torsion", "k_t"): (5.0, 1000.0),
+    ("torsion", "c_t"): (0.0, 2.0),
+    ("higher_bending_modes", "k_scale"): (0.1, 5.0),
+}
+
 _NUDGE = 0.2
 
 
@@ -113,10 +125,14 @@ class FitOutcome:
 
 
 def free_params(effect: str, only: Optional[Sequence[str]] = None) -> List[Tuple[fx.EffectParam, int]]:
-    """(parameter, entry) pairs fitted for ``effect``: its ``fit`` parameters, or ``only``."""
+    """(parameter, entry) pairs fitted for ``effect``: its ``fit`` parameters, or ``only``;
+    bounds narrowed to :data:`BOUNDS` where it has them."""
     out: List[Tuple[fx.EffectParam, int]] = []
     for p in fx.EFFECTS[effect].params.values():
         if (only is None and p.fit) or (only is not None and p.name in only):
+            b = BOUNDS.get((effect, p.name))
+            if b is not None:
+                p = dataclasses.replace(p, lower=max(p.lower, b[0]), upper=min(p.upper, b[1]))
             out.extend((p, i) for i in range(p.length))
     return out
 

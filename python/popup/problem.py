@@ -280,7 +280,7 @@ class ReplayProblem:
         self.model = model
         self.run = run
         self.threads = int(threads)
-        self.nfev = 0
+        self._count = _parent._count if _parent is not None else [0]
         self.where = str(run.data_file if run.data_file is not None else run.source)
         if run.replay not in ("encoder", "reference"):
             raise MeasuredRunError(f"{self.where}: unknown replay mode {run.replay!r}; expected \"encoder\" or \"reference\"")
@@ -349,6 +349,15 @@ class ReplayProblem:
         return p
 
     # ------------------------------------------------------------------ properties
+    @property
+    def nfev(self) -> int:
+        """Simulations run so far by this problem and every problem derived from it."""
+        return self._count[0]
+
+    @nfev.setter
+    def nfev(self, v: int) -> None:
+        self._count[0] = int(v)
+
     @property
     def noise(self) -> Dict[str, float]:
         """White-noise floor σ per channel (channel unit)."""
