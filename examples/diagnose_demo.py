@@ -24,26 +24,27 @@ def main() -> None:
 
     cmp = popup.compare.compare(model, run)
     print(f"\n1. compare the nominal model (free-run encoder replay): mean fit {cmp.overall['fit_pct']:.1f} %")
-    worst = cmp.metrics.sort_values("nrmse", ascending=False).head(3)
+    print(f"   systematic error {cmp.overall['error']:.3g} noise units (0 = at the noise floor)")
+    worst = cmp.metrics.sort_values("noise_multiple", ascending=False).head(3)
     for ch, row in worst.iterrows():
-        print(f"   worst channel {ch:<8} NRMSE {row['nrmse']:.3f}  fit {row['nrmse_fit_pct']:6.1f} %")
+        print(f"   worst channel {ch:<8} {row['noise_multiple']:7.1f}× its noise (σ = {row['noise_std']:.3g} {row['unit']})  NRMSE {row['nrmse']:.3f}  fit {row['nrmse_fit_pct']:6.1f} %")
 
     d = popup.diagnose(model, run)
     print(f"\n2. diagnose: every effect of the library fitted and ranked ({d.seconds:.1f} s, {d.n_rollouts} rollouts)")
-    print(d.to_pandas()[["effect", "significant", "score", "error_after"]].to_string())
+    print(d.to_pandas()[["effect", "significant", "score", "error_after", "explained", "validation_after"]].to_string())
 
     best = d.best
     if best is not None:
         better = best.apply(model)
-        err, _ = popup.diagnosis.model_error(better, run)
+        err, _ = popup.diagnosis.model_error(better, run, problem=d.problem)
         print(f"\n3. add the top suspect: model.with_effect({best.effect!r}, ...)")
         print(f"   fitted: {best.params_text()}")
-        print(f"   error {d.nominal_error:.4f} -> {err:.4f} (predicted {best.error_after:.4f})")
+        print(f"   systematic error {d.nominal_error:.4g} -> {err:.4g} noise units (predicted {best.error_after:.4g})")
 
     h = popup.improve(model, run)
     print("\n4. the loop until nothing significant is left:")
     for s in h.steps:
-        print(f"   {' + '.join(s.effects) or 'nominal':<36} error {s.error:.4f}")
+        print(f"   {' + '.join(s.effects) or 'nominal':<36} systematic error {s.error:.4g} noise units")
     print(f"   {h.conclusion}")
     print(f"   (the run's truth: {run.description.split('hidden effects: ')[-1]})")
 

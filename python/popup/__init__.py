@@ -33,6 +33,8 @@ from .io import MeasuredRun, read_run, write_run
 from . import mcaplog
 from .mcaplog import RunLog, read_log
 from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
+from . import noise, problem, estimate
+from .problem import ReplayProblem
 from .diagnosis import Diagnosis, History, Suspect, diagnose, improve
 from .fit import FitResult, fit_params
 from . import report, synth
@@ -64,6 +66,10 @@ __all__ = [
     "mcaplog",
     "compare",
     "Comparison",
+    "ReplayProblem",
+    "problem",
+    "noise",
+    "estimate",
     "effects",
     "diagnose",
     "improve",

@@ -29,6 +29,14 @@ RigidArm = _core.RigidArm
 ArmLike = Union["_core.Arm", str, "os.PathLike[str]"]
 
 
+def _toml_loads(text: str) -> Dict[str, Any]:
+    try:
+        import tomllib
+    except ImportError:  # Python < 3.11
+        import tomli as tomllib  # type: ignore[no-redef]
+    return tomllib.loads(text)
+
+
 def _report(errors: Sequence[Optional[Tuple[str, str]]], warns: Sequence[Sequence[str]], raise_on_error: bool) -> None:
     """Raise the first failed job's error (``raise_on_error``) and issue every distinct
     warning of a batch once, attributed to the caller of the public method."""
@@ -141,9 +149,7 @@ class Model:
             _warnings.warn(w, PopupWarning, stacklevel=2)
 
     def _defaults(self) -> Tuple[float, Tuple[float, float]]:
-        import tomllib
-
-        d = tomllib.loads(self._m.arm.to_toml())
+        d = _toml_loads(self._m.arm.to_toml())
         return float(d["payload"]["default_kg"]), (float(d["links"][0]["pressure_pa"]), float(d["links"][1]["pressure_pa"]))
 
     # ------------------------------------------------------------------ properties
@@ -192,11 +198,9 @@ class Model:
     def effects_flat(self) -> np.ndarray:
         """The arm's effect parameters as a flat vector (registry order, see
         :mod:`popup.effects`)."""
-        import tomllib
-
         from . import effects as fx
 
-        d = tomllib.loads(self._m.arm.to_toml()).get("effects", {})
+        d = _toml_loads(self._m.arm.to_toml()).get("effects", {})
         return fx.to_flat(d)
 
     @property

@@ -1,0 +1,119 @@
+"""The diagnosis's contract beyond ranking: channels that carry only noise do not hide a
+finding, nothing is lost when a round fails, untested effects are named, progress is
+reported, and the JSON says what the error means."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+
+import popup
+from popup import diagnosis as dg
+from popup.io import write_run
+
+FRICTION = {"tau_c": [1.2, 1.8, 0.6], "b": [0.2, 0.3, 0.1], "tau_s": [0.8, 1.0, 0.4], "v_s": [0.05, 0.05, 0.05]}
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    return popup.Model("popup-lab", payload_kg=1.0)
+
+
+@pytest.fixture(scope="module")
+def friction_run(nominal, tmp_path_factory):
+    """A Stribeck friction run that also records the pressures held at 30 kPa with ±50 Pa
+    sensor noise (the channels that buried the finding before)."""
+    t, q = popup.synth.lab_trajectory(8.0, seed=11)
+    path = tmp_path_factory.mktemp("stribeck")
+    run = popup.synth.measured_run(nominal.with_effect("joint_friction", **FRICTION), t, q, path, seed=11)
+    df = run.data.copy()
+    rng = np.random.default_rng(5)
+    for c in ("p1", "p2"):
+        df[c] = 30e3 + rng.normal(0.0, 50.0, len(df))
+    exp = dict(run.experiment)
+    write_run(path, exp, df, overwrite=True)
+    return popup.read_run(path)
+
+
+def test_noise_only_channels_do_not_hide_the_finding(nominal, friction_run):
+    h = popup.improve(nominal, friction_run, effects=["joint_friction", "payload_mass", "sensor_delay"], max_rounds=2)
+    d0 = h.diagnoses[0]
+    assert {"p1", "p2"} <= set(d0.noise) and {"p1", "p2"} <= set(d0.at_floor)
+    assert d0.noise["p1"] == pytest.approx(50.0, rel=0.1)
+    # the pressures sit at their noise floor whatever the model does
+    assert abs(d0.channel_error["p1"] - 1.0) < 0.05
+    assert h.effects[0] == "joint_friction"
+    assert h.steps[-1].error <= 0.5 * h.steps[0].error
+    # the richer (Stribeck) variant is preferred for a Stribeck truth
+    assert d0.best is not None and d0.best.variant == "Stribeck", d0.to_pandas()
+    assert h.conclusion.startswith("Added joint_friction")
+
+
+def test_a_failing_round_keeps_what_finished(nominal, friction_run, monkeypatch, capsys, tmp_path):
+    calls = {"n": 0}
+    orig = dg.diagnose
+
+    def flaky(*a, **kw):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise popup.StepTooLargeError("time step dt = 1e-3 s is too large (injected)")
+        return orig(*a, **kw)
+
+    monkeypatch.setattr(dg, "diagnose", flaky)
+    h = dg.improve(nominal, friction_run, effects=["joint_friction", "payload_mass"], max_rounds=3)
+    assert not h.complete and "round 2 failed: StepTooLargeError" in h.error
+    assert h.effects == ["joint_friction"] and len(h.steps) == 2 and len(h.diagnoses) == 1
+    d = h.to_dict()
+    assert d["complete"] is False and "injected" in d["error"]
+    assert "incomplete" in d["conclusion"] and d["conclusion"].startswith("Added joint_friction")
+    json.dumps(d, allow_nan=False)
+    # the CLI: exit 1, the JSON with what finished, the report written
+    calls["n"] = 0
+    report = tmp_path / "r.html"
+    rc = dg.cli_main([str(friction_run.source), "--json", "--effects", "joint_friction,payload_mass", "--report", str(report)])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 1 and out["error"] and len(out["history"]) == 2
+    assert report.exists() and "injected" in report.read_text(encoding="utf-8")
+
+
+def test_an_effect_that_cannot_be_tried_is_named(nominal, friction_run, monkeypatch):
+    orig = dg._fit_candidate
+
+    def broken(prob, name, *a, **kw):
+        if name == "backlash":
+            raise popup.StepTooLargeError("injected for backlash")
+        return orig(prob, name, *a, **kw)
+
+    monkeypatch.setattr(dg, "_fit_candidate", broken)
+    seen = []
+    d = dg.diagnose(nominal, friction_run, effects=["backlash", "payload_mass"], progress=seen.append)
+    s = d["backlash"]
+    assert not s.tested and not s.significant and s.message.startswith("not tested: StepTooLargeError")
+    assert d.suspects[-1].effect == "backlash"
+    assert "ranking is incomplete" in d.conclusion and "backlash" in d.conclusion
+    assert [x["effect"] for x in seen] == ["backlash", "payload_mass"] and seen[-1]["total"] == 2
+    assert s.to_dict()["tested"] is False
+
+
+def test_terminal_progress_line():
+    buf = io.StringIO()
+    p = dg.TerminalProgress(buf)
+    p({"round": 1, "effect": "joint_friction", "done": 0, "total": 10})
+    p({"round": 1, "effect": "backlash", "done": 1, "total": 10})
+    p.close()
+    text = buf.getvalue()
+    assert "round 1" in text and "backlash" in text and "1/10 fits" in text and "ETA" in text
+
+
+def test_error_is_in_noise_units_and_zero_for_the_truth(nominal, friction_run):
+    """The truth replays at the noise floor: each channel within 10 % of its noise."""
+    truth = nominal.with_effect("joint_friction", **FRICTION)
+    prob = popup.ReplayProblem(truth, friction_run)
+    err, per = prob.error()
+    assert err < dg.AT_FLOOR, per
+    assert max(per.values()) < 1.1, per
+    assert math.isclose(err, math.sqrt(max(np.mean(np.square(list(per.values()))) - 1.0, 0.0)))
