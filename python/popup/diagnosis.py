@@ -589,7 +589,7 @@ def _step_for(prob: ReplayProblem, m: "Model", check: "Model") -> float:
     limit of ``check`` (the candidate at its stiffest seed)."""
     q = check.rest_state(list(prob.q_enc[0] if not prob.closed else prob.q0))
     # stable_dt returns the model's own dt when that is stable: ask with a huge step to get the limit
-    sdt = check.with_dt(1.0).stable_dt(q, replay=not prob.closed)
+    sdt = check.with_dt(1.0).stable_dt([float(x) for x in q], replay=not prob.closed)
     if STABILITY_MARGIN * sdt >= m.dt * (1 - 1e-12):
         return m.dt
     period = 1.0 / prob.sample_rate

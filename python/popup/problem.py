@@ -264,6 +264,27 @@ class ReplayProblem:
     notes : what was done (rates, smoothing, channels)
     """
 
+    channels: List[str]
+    time: np.ndarray
+    measured: np.ndarray
+    notes: List[str]
+    t_enc: np.ndarray
+    q_enc: np.ndarray
+    q_enc_raw: np.ndarray
+    smoothing: Any
+    train: np.ndarray
+    validation: np.ndarray
+    sample_rate: float
+    iq: Any
+    iv: Any
+    task: Any
+    q0: Any
+    t0: float
+    duration: float
+    sigma: np.ndarray
+    _count: List[int]
+    _nominal: Optional[Tuple[np.ndarray, Any]]
+
     def __init__(
         self,
         model: "Model",
@@ -296,20 +317,20 @@ class ReplayProblem:
             self.iq, self.iv = p.iq, p.iv
             self.task, self.q0, self.t0, self.duration = p.task, p.q0, p.t0, p.duration
             self.sigma = p.sigma
-            self._nominal: Optional[Tuple[np.ndarray, Any]] = None
+            self._nominal = None
             return
         notes: List[str] = []
         self.notes = notes
         self.channels = select_channels(run, channels, self.where, notes, self.closed)
         self.time = np.asarray(run.time, dtype=np.float64)
         self.measured = np.column_stack([np.asarray(run.channel(c), dtype=np.float64) for c in self.channels])
-        self.task: Any = None
-        self.q0: Any = None
+        self.task = None
+        self.q0 = None
         self.t0 = 0.0
         self.duration = 0.0
-        self.iq: Any = None
-        self.iv: Any = None
-        self.smoothing: Any = None
+        self.iq = None
+        self.iv = None
+        self.smoothing = None
         if self.closed:
             self.t_enc, self.q_enc = run.reference()
             self.q_enc_raw = self.q_enc
