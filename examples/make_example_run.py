@@ -1,4 +1,5 @@
-"""Regenerate the bundled example run ``examples/data/lab_run`` (committed; ~0.3 MB).
+"""Regenerate the bundled example run ``examples/data/lab_run`` (committed; CSV, so that it
+reads after a plain ``pip install`` without the optional pyarrow).
 
 A synthetic lab experiment of ``popup-lab`` (8 s at 250 Hz: moves with ring-down holds,
 velocity reversals, a chirp) in which the "real arm" has motoreducer friction and a
@@ -14,8 +15,6 @@ from __future__ import annotations
 import shutil
 import tempfile
 from pathlib import Path
-
-import pandas as pd
 
 import popup
 
@@ -33,10 +32,9 @@ def main() -> Path:
         popup.synth.measured_run(truth, t, q, tmp, seed=7, description="bundled example:")
         OUT.mkdir(parents=True, exist_ok=True)
         shutil.copy(Path(tmp) / "experiment.toml", OUT / "experiment.toml")
-        df = pd.read_csv(Path(tmp) / "measurements.csv")
         for old in ("measurements.csv", "measurements.parquet"):
             (OUT / old).unlink(missing_ok=True)
-        df.to_parquet(OUT / "measurements.parquet", index=False)
+        shutil.copy(Path(tmp) / "measurements.csv", OUT / "measurements.csv")
     run = popup.read_run(OUT)
     print(f"wrote {OUT} ({len(run)} rows, columns {', '.join(run.columns)})")
     return OUT
