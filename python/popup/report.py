@@ -55,15 +55,25 @@ def to_html(result: Union[History, Diagnosis], *, title: str = "popup diagnosis"
 
     matplotlib.use("Agg", force=False)
     h = _as_history(result)
-    d0 = h.diagnoses[0]
-    cmp = d0.comparison
     parts: List[str] = []
     parts.append(f"<h1>{html.escape(title)}</h1>")
     parts.append(f"<p><b>Run:</b> {html.escape(h.run)}<br/><b>Conclusion:</b> {html.escape(h.conclusion)}</p>")
+    if h.error:
+        parts.append(f"<p style='color:#a00'><b>Incomplete:</b> {html.escape(h.error)} (what finished before is below)</p>")
     from .diagnosis import ERROR_DEFINITION
 
     fall = " → ".join(f"{s.error:.4g}" for s in h.steps)
-    parts.append(f"<p><b>Error</b> ({html.escape(ERROR_DEFINITION)}): {fall}</p>")
+    parts.append(f"<p><b>Systematic error</b> in noise units ({html.escape(ERROR_DEFINITION)}): {fall}</p>")
+    rows = "".join(
+        f"<tr><td>{html.escape(c)}</td><td>{h.noise.get(c, float('nan')):.4g}</td><td>{v:.3g}×</td><td>{h.steps[-1].channel_error.get(c, float('nan')):.3g}×</td>"
+        f"<td>{'yes' if h.diagnoses and c in h.diagnoses[0].at_floor else ''}</td></tr>"
+        for c, v in h.steps[0].channel_error.items()
+    )
+    parts.append("<table><tr><th>channel</th><th>noise σ</th><th>nominal (× noise)</th><th>final (× noise)</th><th>signal at noise floor</th></tr>" + rows + "</table>")
+    if not h.diagnoses:
+        return _page(title, parts, h)
+    d0 = h.diagnoses[0]
+    cmp = d0.comparison
     parts.append("<h2>1. Comparison of the nominal model with the run</h2>")
     parts.append(cmp.to_pandas().to_html(float_format=lambda x: f"{x:.4g}"))
     parts.append(_img(cmp.plot("overlay"), "measured vs model, nominal"))
@@ -86,6 +96,10 @@ def to_html(result: Union[History, Diagnosis], *, title: str = "popup diagnosis"
         last = h.diagnoses[-1].comparison
         parts.append(_img(last.plot("overlay"), "measured vs final model"))
     parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in cmp.notes) + "</ul>")
+    return _page(title, parts, h)
+
+
+def _page(title: str, parts: List[str], h: History) -> str:
     data = json.dumps(h.to_dict(), allow_nan=False).replace("</", "<\\/")
     css = "body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}img{max-width:100%}"
     return (
