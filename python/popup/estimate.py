@@ -83,8 +83,8 @@ PARAM_SCALE: Dict[Tuple[str, str], float] = {
 
 #: Starting points tried (one batched rollout) before the fit: the effects are not convex
 #: in their parameters (thresholds, dead zones, delays, masses that move a resonance); a
-#: value applies to every joint/link entry of the parameter.
-SEEDS: Dict[str, List[Dict[str, float]]] = {
+#: number applies to every joint/link entry of the parameter, a list gives one per entry.
+SEEDS: Dict[str, List[Dict[str, Any]]] = {
     "joint_friction": [{"tau_c": 0.5, "b": 0.1}, {"tau_c": 2.0, "b": 0.5}, {"tau_c": 0.2, "b": 1.0}],
     "backlash": [{"gap": 0.005}, {"gap": 0.02}, {"gap": 0.05}],
     "pressure_leak": [{"rate": 0.005}, {"rate": 0.05}],
@@ -92,8 +92,9 @@ SEEDS: Dict[str, List[Dict[str, float]]] = {
     "payload_mass": [{"delta_kg": d} for d in (-1.0, -0.6, -0.3, -0.15, 0.15, 0.3, 0.6, 1.0, 1.5)],
     "sensor_delay": [{"imu": d, "torque": d, "mocap": d} for d in (0.003, 0.01, 0.02, 0.05)],
     "air_drag": [{"cd": 1.0}, {"cd": 5.0}, {"cd": 20.0}],
-    "higher_bending_modes": [{"k_scale": 0.5}, {"k_scale": 1.0}, {"k_scale": 2.0}],
-    "torsion": [{"k_t": 30.0, "c_t": 0.1}, {"k_t": 100.0, "c_t": 0.2}, {"k_t": 300.0, "c_t": 0.5}],
+    # one link compliant, the other near rigid (the upper bound), or both
+    "torsion": [{"k_t": [k1, k2], "c_t": 0.2} for k1, k2 in ((50.0, 1000.0), (150.0, 1000.0), (400.0, 1000.0), (1000.0, 50.0), (1000.0, 150.0), (1000.0, 400.0), (100.0, 100.0), (300.0, 300.0))],
+    "higher_bending_modes": [{"k_scale": [a, b]} for a, b in ((0.5, 0.5), (1.0, 1.0), (2.0, 2.0), (1.0, 3.0), (3.0, 1.0))],
 }
 
 #: Bounds the diagnosis fits within where they are narrower than the registry's: the
@@ -235,14 +236,16 @@ def fit(
     return FitOutcome(x=x, flat=flat_of(x), z=z, J=_jac(x, w), weights=w, nfev=prob.nfev - n0)
 
 
-def seed_points(effect: str, free: List[Tuple[fx.EffectParam, int]], x0: np.ndarray, extra: Optional[List[Dict[str, float]]] = None) -> List[np.ndarray]:
+def seed_points(effect: str, free: List[Tuple[fx.EffectParam, int]], x0: np.ndarray, extra: Optional[List[Dict[str, Any]]] = None) -> List[np.ndarray]:
     """``x0`` and the effect's :data:`SEEDS` (plus ``extra``) as start vectors."""
     cands = [np.asarray(x0, dtype=float)]
     for seed in list(SEEDS.get(effect, [])) + list(extra or []):
         x = cands[0].copy()
-        for j, (p, _) in enumerate(free):
+        for j, (p, i) in enumerate(free):
             if p.name in seed:
-                x[j] = min(max(seed[p.name], p.lower), p.upper)
+                v = seed[p.name]
+                v = float(v[i]) if np.ndim(v) else float(v)
+                x[j] = min(max(v, p.lower), p.upper)
         cands.append(x)
     return cands
 

@@ -266,9 +266,10 @@ def fit_params(
         for eff in sorted({p.effect for p, _ in free}):
             for seed in est.SEEDS.get(eff, []):
                 x = x_start.copy()
-                for j, (p, _) in enumerate(free):
+                for j, (p, i) in enumerate(free):
                     if p.effect == eff and p.name in seed:
-                        x[j] = min(max(seed[p.name], p.lower), p.upper)
+                        v = seed[p.name]
+                        x[j] = min(max(float(v[i]) if np.ndim(v) else float(v), p.lower), p.upper)
                 if not any(np.array_equal(x, c) for c in cands):
                     cands.append(x)
     if grid:
