@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One entry point for a fresh machine: set everything up, then run the demo or the tests.
 #   bash scripts/dev.sh demo   # set up + the main job (examples/demo.py)
-#   bash scripts/dev.sh test   # set up + every test (Rust core, CLI, Python, stubs)
+#   bash scripts/dev.sh test   # set up + every test (Rust core, CLI, Python, stubs, the wheel on the oldest/newest Python)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -31,6 +31,8 @@ case "${1:-}" in
       cargo test --release --workspace --exclude popup-py
     fi
     "$PY" -m pytest -q
+    # the wheel on the oldest and newest Python on the machine, from a plain pip install
+    bash scripts/check_pythons.sh
     ;;
   *)
     echo "usage: bash scripts/dev.sh demo|test" >&2
