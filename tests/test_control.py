@@ -166,8 +166,10 @@ def test_actuator_saturation_is_diagnosable_in_closed_loop(tmp_path):
     top = d.suspects[0]
     assert top.effect == "actuator_saturation" and top.significant
     assert top.params["tau_max"][1] == pytest.approx(tau_true, rel=0.03)
-    e_truth, _ = model_error(m.with_effect("actuator_saturation", tau_max=[1e9, tau_true, 1e9]), run)
-    assert top.error_after <= 1.05 * e_truth
+    e_truth, _ = model_error(m.with_effect("actuator_saturation", tau_max=[1e9, tau_true, 1e9]), run, problem=d.problem)
+    # in closed loop the predicted encoder angles are compared at their quantisation noise
+    # (µrad): a limit a few 1e-5 relative off the truth already shows there
+    assert top.error_after <= 1.05 * e_truth + 0.1 * d.nominal_error, (top.error_after, e_truth, d.nominal_error)
     assert top.error_after < 0.6 * d.nominal_error
 
 

@@ -44,7 +44,8 @@ held-out error falls).
 
 **Refinement.** A significant effect is also fitted in its richer variants
 (:data:`VARIANTS`: friction with Stribeck terms, three segments for bending, a centre-of-mass
-offset for the payload); the variant with the better score is kept.
+offset for the payload); a variant is kept when its score beats the base's by more than
+:data:`SCORE_THRESHOLD` (its extra parameters must pay for themselves).
 
 **Identifiability.** Each fit's scaled Fisher matrix is checked (rank, condition,
 correlations, bounds); parameters the run cannot pin down get an infinite interval and are
@@ -685,7 +686,7 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
             except Exception as e:  # noqa: BLE001
                 notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
                 continue
-            if vf.significant and vf.score > best.score:
+            if vf.significant and vf.score > best.score + SCORE_THRESHOLD:
                 notes.append(f"variant {var['name']} preferred (score {vf.score:.1f} vs {best.score:.1f})")
                 best = vf
             else:
