@@ -51,3 +51,13 @@ def test_noise_free_and_degenerate_inputs():
     assert noise_std(t, 3 * t**3 - t) < 1e-9  # cubics are annihilated
     assert math.isnan(noise_std(t[:4], t[:4]))
     assert math.isnan(noise_std(t, np.full(t.size, np.nan)))
+
+
+def test_sparse_jumps_do_not_inflate_the_floor():
+    """A Coulomb-friction residual switches sign in steps: a handful of windows with huge
+    differences. They are left out by default (and would bias the plain mean)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(10000) / 250.0
+    y = 1.5 * np.sign(np.sin(2 * math.pi * 0.7 * t)) + rng.normal(0, 0.05, t.size)
+    assert noise_std(t, y) == pytest.approx(0.05, rel=0.05)
+    assert noise_std(t, y, robust=False) > 1.5 * 0.05

@@ -8,7 +8,10 @@ annihilates every polynomial of degree < k, so it removes the smooth part (up to
 unbiased estimate of σ² for any white noise distribution (Gaussian, quantisation), on
 uniform and on jittered stamps alike. :func:`noise_std` averages it over every window of
 k + 1 finite samples (windows across a gap longer than ``max_gap`` median steps are left
-out). Applied to a model's residual ``y − ŷ`` rather than to ``y`` itself, what is left
+out), robustly by default: windows whose D²/Σw² exceeds 50 × the median are left out
+(for Gaussian noise that is χ²₁ > 22.7, probability 2e-6; uniform quantisation noise
+never gets there), so that the sparse windows where the residual jumps (Coulomb friction
+switching sign, an impact, a logging glitch) do not count; ``robust=False`` keeps them. Applied to a model's residual ``y − ŷ`` rather than to ``y`` itself, what is left
 of the smooth part is only the model's (smooth) systematic error, so the estimate holds
 for fast signals too.
 
@@ -27,9 +30,10 @@ __all__ = ["noise_std", "DIFFERENCE_ORDER"]
 
 DIFFERENCE_ORDER = 4
 """Order k of the divided differences (removes cubics; the smooth part leaks ~ h⁴)."""
+_OUTLIER = 50.0
 
 
-def noise_std(t: Any, y: Any, *, order: int = DIFFERENCE_ORDER, max_gap: float = 3.0) -> float:
+def noise_std(t: Any, y: Any, *, order: int = DIFFERENCE_ORDER, max_gap: float = 3.0, robust: bool = True) -> float:
     """White-noise standard deviation of ``y`` sampled at ``t`` (same unit as ``y``);
     NaN samples are skipped. Returns NaN with fewer than ``order + 2`` finite samples.
 
@@ -68,4 +72,10 @@ def noise_std(t: Any, y: Any, *, order: int = DIFFERENCE_ORDER, max_gap: float =
     keep &= np.isfinite(d) & (w2 > 0)
     if keep.sum() < 2:
         return math.nan
-    return float(math.sqrt(np.mean(d[keep] ** 2 / w2[keep])))
+    u = d[keep] ** 2 / w2[keep]
+    if robust:
+        # sparse jumps (Coulomb friction switching, backlash impacts, logging glitches)
+        # would dominate the mean: windows beyond 50 × the median (χ²₁ > 22.7, probability
+        # 2e-6 for Gaussian noise, never for quantisation) are left out
+        u = u[u <= _OUTLIER * float(np.median(u))]
+    return float(math.sqrt(np.mean(u)))
