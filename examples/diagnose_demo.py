@@ -29,8 +29,10 @@ def main() -> None:
     for ch, row in worst.iterrows():
         print(f"   worst channel {ch:<8} {row['noise_multiple']:7.1f}× its noise (σ = {row['noise_std']:.3g} {row['unit']})  NRMSE {row['nrmse']:.3f}  fit {row['nrmse_fit_pct']:6.1f} %")
 
-    d = popup.diagnose(model, run)
-    print(f"\n2. diagnose: every effect of the library fitted and ranked ({d.seconds:.1f} s, {d.n_rollouts} rollouts)")
+    # the loop runs the diagnosis of round 1 too: step 2 shows it, step 4 the whole loop
+    h = popup.improve(model, run)
+    d = h.diagnoses[0]
+    print(f"\n2. diagnose: every effect of the library fitted, confirmed on held-out samples and ranked ({d.seconds:.1f} s, {d.n_rollouts} rollouts)")
     print(d.to_pandas()[["effect", "significant", "score", "error_after", "explained", "validation_after"]].to_string())
 
     best = d.best
@@ -41,7 +43,6 @@ def main() -> None:
         print(f"   fitted: {best.params_text()}")
         print(f"   systematic error {d.nominal_error:.4g} -> {err:.4g} noise units (predicted {best.error_after:.4g})")
 
-    h = popup.improve(model, run)
     print("\n4. the loop until nothing significant is left:")
     for s in h.steps:
         print(f"   {' + '.join(s.effects) or 'nominal':<36} systematic error {s.error:.4g} noise units")
