@@ -105,6 +105,12 @@ AT_FLOOR = 0.3
 """Systematic error [noise units] below which a model is said to be at the noise floor
 (the total error within 5 % of the noise: sqrt(1 + 0.3²) = 1.044)."""
 
+#: Effects that move a lightly damped resonance: fitted on a short horizon first (extra start).
+_SHORT_FIRST = {"higher_bending_modes", "torsion", "payload_mass", "wrinkling", "pressure_leak", "air_drag"}
+SHORT_HORIZON_S = 2.5
+"""Length [s] of the short horizon (at least 20 % of the run) of the first fit of an effect
+that moves a resonance."""
+
 #: Effects whose fit needs more iterations than ``max_iter`` (coupled, lightly damped modes).
 _MIN_ITER: Dict[str, int] = {"torsion": 40, "higher_bending_modes": 25, "wrinkling": 20}
 
@@ -418,10 +424,13 @@ class HistoryStep:
     model: Any = field(repr=False, default=None)
     validation_error: float = math.nan
     ci95: Dict[str, Dict[str, List[float]]] = field(default_factory=dict)
+    removed: str = ""
+    """The effect this step removed (backward step), "" when it added one."""
 
     def to_dict(self) -> Dict[str, Any]:
         return {
             "effects": list(self.effects),
+            "removed": self.removed,
             "error": _num(self.error),
             "validation_error": _num(self.validation_error),
             "params": {e: {k: [_num(x) for x in v] for k, v in p.items()} for e, p in self.params.items()},
@@ -531,7 +540,7 @@ class History:
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 4))
         x = np.arange(len(self.steps))
-        labels = ["nominal"] + [f"+{s.effects[-1]}" for s in self.steps[1:]]
+        labels = ["nominal"] + [(f"−{s.removed}" if s.removed else f"+{s.effects[-1]}") for s in self.steps[1:]]
         chans = list(self.steps[0].channel_error)
         for c in chans:
             ax.plot(x, [s.channel_error.get(c, np.nan) for s in self.steps], color="0.7", lw=1)
@@ -605,10 +614,11 @@ def _rank_key(s: Suspect) -> Tuple[int, int, float]:
 class _Fitted:
     """A fitted candidate on its own problem (possibly another structure and step)."""
 
-    def __init__(self, name: str, variant: str, prob: ReplayProblem, z_base: np.ndarray, free: List[Tuple[fx.EffectParam, int]], out: est.FitOutcome) -> None:
+    def __init__(self, name: str, variant: str, prob: ReplayProblem, z_base: np.ndarray, free: List[Tuple[fx.EffectParam, int]], out: est.FitOutcome,
+                 k: Optional[int] = None) -> None:
         self.name, self.variant, self.prob, self.z_base, self.free, self.out = name, variant, prob, z_base, free, out
         lr, self.neff = est.log_ratio(prob, z_base, out.z, prob.train)
-        self.k = len(free)
+        self.k = len(free) if k is None else int(k)  # the candidate's own parameters (refitted earlier effects excluded)
         self.score = lr - self.k * math.log(self.neff)
         self.lr_val, _ = est.log_ratio(prob, z_base, out.z, prob.validation)
         self.e0, _ = prob.error(z_base)
@@ -621,21 +631,23 @@ class _Fitted:
         )
 
     def suspect(self, ev: Dict[str, Any], nfev: int, message: str = "") -> Suspect:
-        names = [f"{p.name}[{i}]" for p, i in self.free]
+        names = [f"{p.name}[{i}]" if p.effect == self.name else f"{p.effect}.{p.name}[{i}]" for p, i in self.free]
         half, ident = est.uncertainty(self.out, self.free, names, self.neff)
         ci: Dict[str, List[float]] = {}
         for (p, i), h in zip(self.free, half):
-            ci.setdefault(p.name, [math.nan] * p.length)[i] = float(h)
+            if p.effect == self.name:
+                ci.setdefault(p.name, [math.nan] * p.length)[i] = float(h)
         return Suspect(
             self.name, self.significant, float(self.score), est.params_dict(self.name, self.out.flat), ci, self.e0, self.e1, self.per1, ev,
             n_eff=self.neff, n_rollouts=nfev, message=message, tested=True, explained=self.explained,
             validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant,
-            identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free}),
+            identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free if p.effect == self.name}),
         )
 
 
 def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str, Any]], only: Optional[Sequence[str]], start: Optional[Dict[str, List[float]]],
-                   extra_seeds: Optional[List[Dict[str, float]]], max_iter: int, variant: str = "") -> Tuple[_Fitted, str]:
+                   extra_seeds: Optional[List[Dict[str, Any]]], max_iter: int, variant: str = "",
+                   also: Optional[List[Tuple[fx.EffectParam, int]]] = None) -> Tuple[_Fitted, str]:
     model = prob.model
     m = model
     note = ""
@@ -657,15 +669,31 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
             flat[fx.EFFECTS[name].params[k].slice] = v
     x0 = np.array([flat[q.offset + i] for q, i in free]) if start else _x0(p, free, flat)
     cands = _candidates(name, p, free, flat, x0, extra_seeds)
-    xs, _ = est.best_start(p, free, flat, cands)
-    out = est.fit(p, flat, free, xs, max(max_iter, _MIN_ITER.get(name, 0)))
-    return _Fitted(name, variant, p, z_base, free, out), note
+    # the effects added in earlier rounds are refitted with the candidate (forward
+    # selection with refit: an earlier fit biased by this effect's absence is corrected)
+    others = [pi for pi in (also or []) if pi[0].effect != name]
+    cur = np.array([flat[q.offset + i] for q, i in others])
+    cands = [np.concatenate([c, cur]) for c in cands]
+    free_all = free + others
+    iters = max(max_iter, _MIN_ITER.get(name, 0))
+    if name in _SHORT_FIRST:
+        # a lightly damped response drifts out of phase over a long run, which makes the
+        # full-run objective a needle around the truth: fit on a short horizon first (a wide
+        # basin) and offer its optimum as one more start
+        t0, t1 = float(p.time[0]), float(p.time[-1])
+        ph = p.with_horizon(t0 + max(SHORT_HORIZON_S, 0.2 * (t1 - t0)))
+        if ph is not p:
+            xh, _ = est.best_start(ph, free_all, flat, cands)
+            cands.append(est.fit(ph, flat, free_all, xh, iters).x)
+    xs, _ = est.best_start(p, free_all, flat, cands)
+    out = est.fit(p, flat, free_all, xs, iters)
+    return _Fitted(name, variant, p, z_base, free_all, out, k=len(free)), note
 
 
-def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int) -> Suspect:
+def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int, also: Optional[List[Tuple[fx.EffectParam, int]]] = None) -> Suspect:
     n0 = prob.nfev
     try:
-        fitted, note = _fit_candidate(prob, name, _STRUCTURE.get(name), None, None, None, max_iter)
+        fitted, note = _fit_candidate(prob, name, _STRUCTURE.get(name), None, None, None, max_iter, also=also)
     except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
         return Suspect(name, False, -math.inf, {}, {}, math.nan, math.nan, {}, ev, tested=False,
                        message=f"not tested: {type(e).__name__}: {e}")
@@ -682,7 +710,7 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
                 if var.get("extra"):
                     only = sorted({p.name for p, _ in fitted.free} | set(var["extra"]))
                     start = {k: v for k, v in base_params.items() if k in only and k not in var["extra"]}
-                vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]))
+                vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also)
             except Exception as e:  # noqa: BLE001
                 notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
                 continue
@@ -717,6 +745,7 @@ def diagnose(
     max_iter: int = 15,
     problem: Optional[ReplayProblem] = None,
     progress: Optional[Progress] = None,
+    refit: Optional[Mapping[str, Sequence[str]]] = None,
 ) -> Diagnosis:
     """Rank every effect of the library (or ``effects``) by how much of the model's
     systematic error on ``run`` it explains, each fitted, validated on held-out samples,
@@ -725,6 +754,8 @@ def diagnose(
     Effects that ``model`` already has are skipped. ``threads=0`` uses every core.
     ``problem``: the run already set up in ``model`` (:class:`ReplayProblem`).
     ``progress``: called with ``{"effect", "done", "total"}`` before each effect.
+    ``refit``: effects of ``model`` (``{effect: [parameter names]}``, as :func:`improve`
+    added them) refitted jointly with each candidate.
     """
     t_start = time.perf_counter()
     names = list(fx.EFFECT_NAMES if effects is None else effects)
@@ -740,6 +771,7 @@ def diagnose(
     cmp = compare(model, run, problem=prob)
     e0, per0 = prob.error()
     have = set(fx.active(model.effects_flat))
+    also = [pi for e, ps in (refit or {}).items() for pi in est.free_params(e, list(ps) or None)]
     todo = [n for n in names if n not in have]
     suspects: List[Suspect] = []
     extra = 0
@@ -747,7 +779,7 @@ def diagnose(
         if progress is not None:
             progress({"effect": name, "done": i, "total": len(todo)})
         ev = _evidence(name, cmp, prob)
-        s = _try_effect(prob, name, ev, max_iter)
+        s = _try_effect(prob, name, ev, max_iter, also)
         extra += s.n_rollouts
         suspects.append(s)
     suspects.sort(key=_rank_key)
@@ -848,7 +880,7 @@ def improve(
     try:
         d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog)
         diags.append(d)
-        while d.best is not None and len(added) < max_rounds:
+        while d.best is not None and rnd < max_rounds:
             rnd += 1
             s = d.best
             added.append(s.effect)
@@ -861,10 +893,20 @@ def improve(
             err, per = cprob.error()
             steps.append(HistoryStep(list(added), {e: current.effects.get(e, {}) for e in added}, err, per, current,
                                      validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci))
+            # backward step: an effect added earlier that the refitted model no longer needs
+            # (it stood in for the one just added) is removed
+            for e in list(added[:-1]):
+                if not _still_needed(cprob, e, fitted_params[e]):
+                    added.remove(e)
+                    fitted_params.pop(e)
+                    current, cprob, ci = _refit(prob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
+                    err, per = cprob.error()
+                    steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
+                                             validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e))
             remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
             if not remaining:
                 break
-            d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog)
+            d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, refit=fitted_params)
             diags.append(d)
     except KeyboardInterrupt:
         raise
@@ -874,6 +916,21 @@ def improve(
     h.conclusion = _conclude(h, max_rounds)
     h.seconds = time.perf_counter() - t_start
     return h
+
+
+def _still_needed(prob: ReplayProblem, effect: str, params: Sequence[str]) -> bool:
+    """Whether the model of ``prob`` needs ``effect``: the likelihood ratio of the model
+    with it against the model without it (its parameters neutral, nothing refitted, so
+    the test keeps an effect when in doubt) passes the significance threshold."""
+    try:
+        without = prob.with_model(prob.model.without_effect(effect))
+        z_wo = without.residuals(without.nominal_simulation())
+    except Exception:  # noqa: BLE001 - if it cannot be removed, keep it
+        return True
+    z = prob.residuals(prob.nominal_simulation())
+    lr, neff = est.log_ratio(prob, z_wo, z, prob.train)
+    k = len(est.free_params(effect, list(params) or None))
+    return lr - k * math.log(neff) > SCORE_THRESHOLD
 
 
 def _refit(prob: ReplayProblem, added: List[str], fitted: Dict[str, List[str]], max_iter: int) -> Tuple["Model", ReplayProblem, Dict[str, Dict[str, List[float]]]]:
@@ -899,6 +956,9 @@ def _conclude(h: History, max_rounds: int) -> str:
     parts: List[str] = []
     for i in range(1, len(h.steps)):
         prev, st = h.steps[i - 1], h.steps[i]
+        if st.removed:
+            parts.append(f"removed {st.removed} again (with {', '.join(st.effects)} refitted it explains nothing more; error {prev.error:.3g} → {st.error:.3g})")
+            continue
         e = st.effects[-1]
         vals = st.params.get(e, {})
         ci = st.ci95.get(e, {})
@@ -910,14 +970,15 @@ def _conclude(h: History, max_rounds: int) -> str:
         parts.append(f"added {e} ({ptxt}): the systematic error fell from {prev.error:.3g} to {st.error:.3g} noise units ({100 * drop:.0f} % less)"
                      + (f"; on {ch}" if ch else ""))
     last = h.steps[-1]
-    d_last = h.diagnoses[len(h.steps) - 1] if len(h.diagnoses) >= len(h.steps) else None
+    d_last = h.diagnoses[-1] if h.diagnoses and h.diagnoses[-1].problem is not None and h.diagnoses[-1].problem.model is last.model else None
+    n_added = sum(1 for st in h.steps[1:] if not st.removed)
     if last.error <= AT_FLOOR:
         left = f"what is left is at the noise floor (systematic error {last.error:.3g} noise units)"
         if not parts:
             left = f"the model is at the noise floor (systematic error {last.error:.3g} noise units): nothing significant is missing"
     else:
         where = _where(d_last, last.channel_error) if d_last is not None else ", ".join(f"{c} {v:.2g}× noise" for c, v in sorted(last.channel_error.items(), key=lambda kv: -kv[1])[:3])
-        if d_last is not None and d_last.best is not None and len(h.steps) - 1 >= max_rounds:
+        if d_last is not None and d_last.best is not None and n_added >= max_rounds:
             left = f"stopped after max_rounds = {max_rounds}; {d_last.best.effect} is still significant ({where})"
         else:
             left = f"a systematic error of {last.error:.3g} noise units is left that is not explained by the library ({where})"

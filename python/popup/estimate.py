@@ -242,7 +242,7 @@ def seed_points(effect: str, free: List[Tuple[fx.EffectParam, int]], x0: np.ndar
     for seed in list(SEEDS.get(effect, [])) + list(extra or []):
         x = cands[0].copy()
         for j, (p, i) in enumerate(free):
-            if p.name in seed:
+            if p.effect == effect and p.name in seed:
                 v = seed[p.name]
                 v = float(v[i]) if np.ndim(v) else float(v)
                 x[j] = min(max(v, p.lower), p.upper)

@@ -404,6 +404,25 @@ class ReplayProblem:
         candidate structure, a smaller step); the output rate must be a multiple of its ``dt``."""
         return ReplayProblem(model, self.run, threads=self.threads, _parent=self)
 
+    def with_horizon(self, t_end: float) -> "ReplayProblem":
+        """The same problem on the measured samples up to ``t_end`` [s] only (encoder and
+        references cut there, every kept sample a training one): a short horizon on which
+        a lightly damped response has not yet drifted out of phase, so a fit's basin is
+        wide (used for extra starts)."""
+        p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
+        keep = self.time <= t_end
+        if keep.sum() < 20:
+            return self
+        p.time, p.measured = self.time[keep], self.measured[keep]
+        p.used = self.used[keep]
+        p.train, p.validation = p.used.copy(), np.zeros(int(keep.sum()), dtype=bool)
+        k_enc = self.t_enc <= t_end + 1e-9
+        if k_enc.sum() >= 5:
+            p.t_enc, p.q_enc, p.q_enc_raw = self.t_enc[k_enc], self.q_enc[k_enc], self.q_enc_raw[k_enc]
+        if self.closed:
+            p.duration = min(self.duration, float(t_end - self.t0))
+        return p
+
     def with_initial_state(self, q: Any, v: Any) -> "ReplayProblem":
         """The same problem started from chain coordinates ``q`` and rates ``v`` (nv,)."""
         p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
