@@ -1,0 +1,330 @@
+"""The diagnosis on families of runs it was never tuned to, from two engines.
+
+Generates test families with :mod:`families` (popup's own engine and MuJoCo), runs
+``python3 -m popup diagnose RUN --json`` on each run (a subprocess: exactly what a user
+runs), and counts, separately for each engine:
+
+(a) effect runs (one hidden effect): the hidden effect is the first one added
+    (``history[1]["effects"][0]``) AND the error falls by at least half
+    (``min(history[*]["error"]) <= 0.5 * nominal_error``);
+(b) nominal runs: a false alarm is any effect added (``len(history) > 1``);
+(c) pairs: both hidden effects are among the effects added within the first two rounds;
+(d) disturbance (outside the library): nothing added and the ``conclusion`` says the
+    error is not explained by the library.
+
+A diagnosis that fails (exit code 2, a crash, a timeout, no JSON) is counted as failed
+with its message; exit code 1 (incomplete, partial results) is classified on what it
+printed and flagged. Results are cached per run (``OUT/results/<run>.json``) so that an
+interrupted benchmark resumes with ``--resume``.
+
+::
+
+    python benchmarks/bench_diagnosis_families.py --engine both --n 1            # ~25 runs
+    python benchmarks/bench_diagnosis_families.py --engine mujoco --effects joint_friction,payload_mass --n 2
+    python benchmarks/bench_diagnosis_families.py --generate-only --n 4          # just the runs
+
+Prints a table and writes ``OUT/summary.json``. Asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import families as F  # noqa: E402
+
+#: what a conclusion says when the residual is left to something outside the library
+NOT_EXPLAINED = re.compile(r"not explained by the library|no library effect explains|outside the library|not in the library", re.I)
+
+
+# ---------------------------------------------------------------------------- diagnose
+def _extract_json(text: str) -> Optional[Dict[str, Any]]:
+    """The JSON object printed by ``popup diagnose --json`` (stdout may hold other lines)."""
+    text = text.strip()
+    if not text:
+        return None
+    try:
+        v = json.loads(text)
+        return v if isinstance(v, dict) else None
+    except ValueError:
+        pass
+    for line in reversed(text.splitlines()):
+        line = line.strip()
+        if line.startswith("{"):
+            try:
+                v = json.loads(line)
+                return v if isinstance(v, dict) else None
+            except ValueError:
+                continue
+    a, b = text.find("{"), text.rfind("}")
+    if 0 <= a < b:
+        try:
+            v = json.loads(text[a:b + 1])
+            return v if isinstance(v, dict) else None
+        except ValueError:
+            return None
+    return None
+
+
+def diagnose(run: Path, *, timeout: float, extra: Sequence[str] = ()) -> Dict[str, Any]:
+    """Run ``python3 -m popup diagnose RUN --json`` (niced); returns ``rc``, ``seconds``,
+    ``json`` (the parsed object or None), ``stderr`` (tail) and ``failure`` (None, or why
+    there is nothing to classify)."""
+    cmd = [sys.executable, "-m", "popup", "diagnose", str(run), "--json", *extra]
+    if hasattr(os, "nice"):
+        cmd = ["nice", "-n", "10", *cmd]
+    t0 = time.perf_counter()
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        rc, out, err = p.returncode, p.stdout, p.stderr
+    except subprocess.TimeoutExpired as e:
+        out = e.stdout.decode() if isinstance(e.stdout, bytes) else (e.stdout or "")
+        err = e.stderr.decode() if isinstance(e.stderr, bytes) else (e.stderr or "")
+        rc = None
+    secs = time.perf_counter() - t0
+    js = _extract_json(out)
+    failure = None
+    if rc is None:
+        failure = f"timeout after {timeout:.0f} s"
+    elif rc == 2:
+        failure = "bad input (exit 2): " + (err.strip().splitlines() or ["(no message)"])[-1][:300]
+    elif rc not in (0, 1):
+        failure = f"exit {rc}: " + (err.strip().splitlines() or ["(no message)"])[-1][:300]
+    if failure is None and js is None:
+        failure = f"exit {rc} but no JSON object on stdout ({len(out)} chars)"
+    if js is not None and failure is None and not isinstance(js.get("history"), list):
+        failure = "JSON without a history list"
+    return {"rc": rc, "seconds": round(secs, 1), "json": js, "stderr": err[-2000:], "failure": failure}
+
+
+# ---------------------------------------------------------------------------- classify
+def _f(x: Any) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return math.nan
+    return v
+
+
+def classify(truth: Dict[str, Any], res: Dict[str, Any]) -> Dict[str, Any]:
+    """Outcome of one run: ``ok`` (True/False/None when the diagnosis failed), the
+    effects added per round, the error fall and the criteria of the module docs."""
+    kind = truth["kind"]
+    hidden = list(truth.get("hidden", []))
+    out: Dict[str, Any] = {"kind": kind, "hidden": hidden, "ok": None, "failure": res.get("failure"), "rc": res.get("rc"),
+                           "incomplete": res.get("rc") == 1 or bool((res.get("json") or {}).get("error"))}
+    js = res.get("json")
+    if res.get("failure") or js is None:
+        return out
+    hist = [h for h in js.get("history", []) if isinstance(h, dict)]
+    added: List[str] = []
+    for i in range(1, len(hist)):
+        cur = [str(e) for e in hist[i].get("effects", []) or []]
+        prev = [str(e) for e in hist[i - 1].get("effects", []) or []]
+        new = [e for e in cur if e not in prev]
+        added.append(new[0] if new else (cur[-1] if cur else "?"))
+    first = None
+    if len(hist) > 1 and hist[1].get("effects"):
+        first = str(hist[1]["effects"][0])
+    sig = [s.get("effect") for s in js.get("suspects", []) or [] if isinstance(s, dict) and s.get("significant")]
+    nom = _f(js.get("nominal_error"))
+    errs = [_f(h.get("error")) for h in hist]
+    errs = [e for e in errs if math.isfinite(e)]
+    emin = min(errs) if errs else math.nan
+    halved = bool(math.isfinite(nom) and nom > 0 and math.isfinite(emin) and emin <= 0.5 * nom)
+    concl = str(js.get("conclusion", ""))
+    out.update(added=added, first=first, top_significant=sig[0] if sig else None, nominal_error=nom, min_error=emin,
+               halved=halved, conclusion=concl[:600], error=js.get("error"))
+    if kind == "effect":
+        out["first_ok"] = first == hidden[0]
+        out["ok"] = bool(out["first_ok"] and halved)
+    elif kind == "nominal":
+        out["false_alarm"] = len(hist) > 1
+        out["ok"] = not out["false_alarm"]
+    elif kind == "pair":
+        two = set(str(e) for e in (hist[min(2, len(hist) - 1)].get("effects", []) or [])) if hist else set()
+        out["both_in_two"] = set(hidden) <= two
+        out["ok"] = out["both_in_two"]
+    elif kind == "disturbance":
+        out["nothing_added"] = len(hist) <= 1
+        out["says_outside"] = bool(NOT_EXPLAINED.search(concl))
+        out["ok"] = bool(out["nothing_added"] and out["says_outside"])
+    return out
+
+
+# ---------------------------------------------------------------------------- report
+CRITERION = {
+    "effect": "(a) hidden effect added first AND error ≥ halved",
+    "nominal": "(b) no false alarm (nothing added)",
+    "pair": "(c) both effects added within two rounds",
+    "disturbance": "(d) nothing added AND conclusion: not explained by the library",
+}
+
+
+def _frac(a: int, b: int) -> str:
+    return f"{a}/{b}" if b else "-"
+
+
+def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]:
+    rs = [r for r in rows if r["truth"]["engine"] == engine]
+    lines = [f"engine: {engine}  ({len(rs)} runs)", ""]
+    hdr = f"{'family':<22}{'runs':>5}{'ok':>6}{'near':>8}{'above':>8}{'failed':>8}{'incompl.':>9}{'median s':>10}  added (per run)"
+    lines.append(hdr)
+    lines.append("-" * len(hdr))
+    summary: Dict[str, Any] = {}
+    fams = sorted({r["truth"]["family"] for r in rs}, key=lambda f: (f in ("nominal", "pairs", "disturbance"), f))
+    for fam in fams:
+        g = [r for r in rs if r["truth"]["family"] == fam]
+        ok = sum(1 for r in g if r["outcome"]["ok"])
+        failed = sum(1 for r in g if r["outcome"]["ok"] is None)
+        inc = sum(1 for r in g if r["outcome"].get("incomplete"))
+        lv = {lvl: [r for r in g if r["truth"].get("level") == lvl and r["outcome"]["ok"] is not None] for lvl in ("near", "above")}
+        secs = sorted(r["diagnosis"]["seconds"] for r in g)
+        med = secs[len(secs) // 2] if secs else math.nan
+        adds = "; ".join("+".join(r["outcome"].get("added") or []) or ("FAILED" if r["outcome"]["ok"] is None else "nothing") for r in g)
+        lines.append(f"{fam:<22}{len(g):>5}{ok:>6}{_frac(sum(1 for r in lv['near'] if r['outcome']['ok']), len(lv['near'])):>8}"
+                     f"{_frac(sum(1 for r in lv['above'] if r['outcome']['ok']), len(lv['above'])):>8}{failed:>8}{inc:>9}{med:>10.0f}  {adds[:90]}")
+        summary[fam] = {"runs": len(g), "ok": ok, "failed": failed, "incomplete": inc,
+                        "near": [sum(1 for r in lv["near"] if r["outcome"]["ok"]), len(lv["near"])],
+                        "above": [sum(1 for r in lv["above"] if r["outcome"]["ok"]), len(lv["above"])]}
+    lines.append("")
+    counts: Dict[str, Any] = {}
+    for kind in ("effect", "nominal", "pair", "disturbance"):
+        g = [r for r in rs if r["outcome"]["kind"] == kind]
+        if not g:
+            continue
+        done = [r for r in g if r["outcome"]["ok"] is not None]
+        ok = sum(1 for r in done if r["outcome"]["ok"])
+        extra = ""
+        if kind == "effect":
+            fo = sum(1 for r in done if r["outcome"].get("first_ok"))
+            hv = sum(1 for r in done if r["outcome"].get("halved"))
+            extra = f"   [added first {fo}/{len(done)}, error halved {hv}/{len(done)}]"
+            counts["effect_first"] = fo
+            counts["effect_halved"] = hv
+        if kind == "nominal":
+            fa = sum(1 for r in done if r["outcome"].get("false_alarm"))
+            extra = f"   [false alarms {fa}/{len(done)}]"
+            counts["false_alarms"] = fa
+        if kind == "disturbance":
+            na = sum(1 for r in done if r["outcome"].get("nothing_added"))
+            so = sum(1 for r in done if r["outcome"].get("says_outside"))
+            extra = f"   [nothing added {na}/{len(done)}, says outside the library {so}/{len(done)}]"
+        lines.append(f"{CRITERION[kind]:<64} {ok}/{len(done)} ({len(g) - len(done)} failed){extra}")
+        counts[kind] = {"ok": ok, "classified": len(done), "failed": len(g) - len(done)}
+    return "\n".join(lines), {"families": summary, "counts": counts}
+
+
+# ---------------------------------------------------------------------------- main
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--engine", choices=("popup", "mujoco", "both"), default="both")
+    ap.add_argument("--n", type=int, default=1, help="runs per family (default 1)")
+    ap.add_argument("--effects", help="comma-separated effect families (default: every effect the engine can make)")
+    ap.add_argument("--kinds", default="nominal,pairs,disturbance", help="the other families to include (comma-separated; '' for none)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--jobs", type=int, default=1, help="runs generated / diagnosed at the same time (default 1)")
+    ap.add_argument("--out", default="out/families", help="folder for the runs, the per-run results and summary.json")
+    ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per diagnosis (default 1800)")
+    ap.add_argument("--resume", action="store_true", help="reuse runs and results already in --out")
+    ap.add_argument("--generate-only", action="store_true", help="generate the runs, diagnose nothing")
+    ap.add_argument("--diagnose-args", default="", help="extra arguments for popup diagnose (one string, split on spaces)")
+    a = ap.parse_args(argv)
+
+    engines = ["popup", "mujoco"] if a.engine == "both" else [a.engine]
+    out = Path(a.out)
+    (out / "results").mkdir(parents=True, exist_ok=True)
+    extra = [x for x in a.diagnose_args.split() if x]
+    kinds_extra = [k.strip() for k in a.kinds.split(",") if k.strip()]
+    plan: List[Tuple[str, str]] = []
+    for eng in engines:
+        effs = [e.strip() for e in a.effects.split(",")] if a.effects else F.EFFECT_FAMILIES[eng]
+        for e in effs:
+            if e not in F.LIBRARY:
+                ap.error(f"--effects: unknown effect {e!r} (library: {', '.join(F.LIBRARY)})")
+            if e in F.EFFECT_FAMILIES[eng]:
+                plan.append((eng, e))
+            else:
+                print(f"note: the {eng} engine has no {e} family (skipped)")
+        for k in kinds_extra:
+            if k not in ("nominal", "pairs", "disturbance"):
+                ap.error(f"--kinds: {k!r} is not one of nominal, pairs, disturbance")
+            plan.append((eng, k))
+
+    # ---- generate
+    t0 = time.perf_counter()
+    runs: List[Tuple[Path, Dict[str, Any]]] = []
+    for eng, kind in plan:
+        specs = F.family_specs(kind, eng, a.n, a.seed)
+        have = [(out / sp.name) for sp in specs]
+        if a.resume and all((p / "measurements.csv").is_file() for p in have):
+            runs += [(p, F.read_truth(p)) for p in have]
+            continue
+        tg = time.perf_counter()
+        got = F.make_family(kind, eng, a.n, a.seed, out, jobs=a.jobs)
+        print(f"generated {len(got)} {eng}/{kind} run(s) in {time.perf_counter() - tg:.1f} s", flush=True)
+        runs += got
+    print(f"{len(runs)} runs in {out} ({time.perf_counter() - t0:.0f} s)\n", flush=True)
+    if a.generate_only:
+        return 0
+
+    # ---- diagnose
+    def one(item: Tuple[Path, Dict[str, Any]]) -> Dict[str, Any]:
+        path, truth = item
+        cache = out / "results" / f"{path.name}.json"
+        if a.resume and cache.is_file():
+            try:
+                return json.loads(cache.read_text())
+            except ValueError:
+                pass
+        res = diagnose(path, timeout=a.timeout, extra=extra)
+        oc = classify(truth, res)
+        row = {"run": str(path), "truth": truth, "diagnosis": {k: v for k, v in res.items() if k != "json"}, "outcome": oc, "json": res["json"]}
+        cache.write_text(json.dumps(row, default=str))
+        o = oc
+        verdict = "FAILED" if o["ok"] is None else ("ok" if o["ok"] else "wrong")
+        print(f"[{verdict:>6}] {path.name:<40} hidden={'+'.join(truth.get('hidden', [])) or '-':<34} "
+              f"added={'+'.join(o.get('added') or []) or '-':<40} err {o.get('nominal_error', math.nan):.3g} -> {o.get('min_error', math.nan):.3g}  "
+              f"{res['seconds']:.0f} s{'  ' + str(o['failure']) if o['failure'] else ''}", flush=True)
+        return row
+
+    rows: List[Dict[str, Any]] = []
+    if a.jobs > 1:
+        with ThreadPoolExecutor(max_workers=a.jobs) as ex:
+            rows = list(ex.map(one, runs))
+    else:
+        rows = [one(r) for r in runs]
+
+    # ---- report
+    report: Dict[str, Any] = {"args": vars(a), "engines": {}, "runs": []}
+    print()
+    for eng in engines:
+        text, summ = table(rows, eng)
+        print(text)
+        print()
+        report["engines"][eng] = summ
+    for r in rows:
+        js = r.get("json") or {}
+        report["runs"].append({
+            "run": r["run"], "truth": r["truth"], "rc": r["diagnosis"]["rc"], "seconds": r["diagnosis"]["seconds"],
+            "failure": r["diagnosis"]["failure"], "outcome": r["outcome"],
+            "suspects": [{k: s.get(k) for k in ("effect", "significant", "tested", "score", "error_after", "message")} for s in js.get("suspects", []) or [] if isinstance(s, dict)],
+        })
+    (out / "summary.json").write_text(json.dumps(report, indent=1, default=str))
+    print(f"summary: {out / 'summary.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,272 @@
+"""Test families of lab-style runs from two engines (benchmarks/families.py).
+
+The cheap part (default): the generator itself - MuJoCo and popup agree on a nominal
+replay far inside the noise, every generated run reads back, the lab variations (rate,
+jitter, channel sets, dropouts, pressures, noise) are really in the files, each MuJoCo
+effect moves the channels, everything is deterministic from the seed, and the
+benchmark's classification of ``popup diagnose --json`` output. The diagnosis itself on
+a few runs is ``@pytest.mark.slow`` (``pytest -m slow``); the whole families are
+``benchmarks/bench_diagnosis_families.py``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import popup
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import bench_diagnosis_families as bench  # noqa: E402
+import families as F  # noqa: E402
+
+QUICK = dict(duration=3.0)
+
+
+def _read(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a generated run reads back without any warning
+        return popup.read_run(path)
+
+
+# ---------------------------------------------------------------------------- engines
+
+
+def test_mujoco_and_popup_agree_on_a_nominal_replay_far_inside_the_noise():
+    pytest.importorskip("mujoco")
+    agg = F.engine_agreement(duration=8.0, seed=1)
+    for c in F.OUT_CHANNELS[3:]:
+        assert agg[c]["rms_sigma"] < 0.02, (c, agg[c])
+        assert agg[c]["max_sigma"] < 0.2, (c, agg[c])
+        assert agg[c]["std"] > 20 * F.NOISE["tau" if c.startswith("tau") else "ee" if c.startswith("ee") else "imu"] or c.startswith("ee"), (c, agg[c])
+    for n in ("d11", "d12", "d21", "d22"):
+        assert agg[n]["max_rad"] < 1e-7, (n, agg[n])
+
+
+def test_mujoco_effects_move_the_channels_and_neutral_ones_do_not():
+    pytest.importorskip("mujoco")
+    exc = F.excitation(2.0, seed=5)
+    st = F.make_stamps(2.0, 500.0, 0.0, np.random.default_rng(0))
+    base = F.MujocoArm(1.0, (30e3, 30e3)).run(exc, st)
+    cases = {
+        "joint_friction": {"tau_c": [1.0, 1.0, 1.0], "b": [0.1, 0.1, 0.1], "tau_s": [0.3, 0.3, 0.3], "v_s": [0.05] * 3},
+        "payload_mass": {"delta_kg": 0.2},
+        "torsion": {"k_t": [150.0, math.inf], "c_t": [0.2, 0.0]},
+        "higher_bending_modes": {"k_scale": [1.0, 1.0]},
+        "air_drag": {"cd": 8.0},
+        "backlash": {"gap": [0.01, 0.02, 0.015]},
+        "pressure_leak": {"rate": [0.2, 0.2]},
+        "wrinkling": {"ratio": 0.4, "mw_scale": 0.7},
+    }
+    for name, p in cases.items():
+        out = F.MujocoArm(1.0, (30e3, 30e3), {name: p}).run(exc, st)
+        dev = max(float(np.sqrt(np.mean((out[c] - base[c]) ** 2))) / F.NOISE[g]
+                  for g, cs in (("tau", ["tau1", "tau2", "tau3"]), ("imu", ["imu2_ax", "imu2_ay", "imu2_az"])) for c in cs)
+        assert dev > 1.0, (name, dev)
+    # the delay shifts the recorded channel in time and nothing else
+    out = F.MujocoArm(1.0, (30e3, 30e3)).run(exc, st, delays={"imu": 0.01})
+    k = 5  # 10 ms at 500 Hz
+    assert np.allclose(out["imu2_ay"][k:], base["imu2_ay"][:-k], atol=1e-9) and np.array_equal(out["tau2"], base["tau2"])
+    assert np.all(out["imu2_ay"][:k] == base["imu2_ay"][0])  # at rest before t = 0
+    # a disturbance torque on a bending joint moves it
+    out = F.MujocoArm(1.0, (30e3, 30e3), None, {"joint": "d22", "freq_hz": 1.7, "phase": 0.0, "amp_nm": 3.0}).run(exc, st)
+    assert np.sqrt(np.mean((out["imu2_az"] - base["imu2_az"]) ** 2)) > 5 * F.NOISE["imu"]
+
+
+def test_mujoco_backlash_rests_against_the_gap_and_higher_modes_keep_the_static_sag():
+    pytest.importorskip("mujoco")
+    nominal = popup.Model("popup-lab", payload_kg=1.0)
+    arm = F.MujocoArm(1.0, (30e3, 30e3), {"backlash": {"gap": [0.01, 0.02, 0.02]}})
+    q = arm.rest((0.0, 0.0, 0.0))
+    for mi, dof, qa in arm.play:
+        if mi > 0:  # gravity-loaded joints: the link side hangs on one flank of the gap
+            assert abs(abs(q[qa]) - 0.01) < 1e-4, (mi, q[qa])
+    hbm = F.MujocoArm(1.0, (30e3, 30e3), {"higher_bending_modes": {"k_scale": [1.0, 1.0]}})
+    q = hbm.rest((0.0, 0.0, 0.0))
+    hbm.d.qpos[:] = q
+    hbm.mujoco.mj_kinematics(hbm.m, hbm.d)
+    z = nominal.end_effector(nominal.rest_state((0.0, 0.0, 0.0)))[2]
+    assert abs(hbm.d.site_xpos[hbm.ee_site][2] - z) < 1e-6
+    assert hbm.m.nq == 11 and 1.1 < hbm.hbm_scale < 1.6
+
+
+# ---------------------------------------------------------------------------- runs
+
+
+@pytest.mark.parametrize("engine", ["popup", "mujoco"])
+def test_generated_runs_read_back_and_declare_only_what_a_lab_knows(engine, tmp_path):
+    if engine == "mujoco":
+        pytest.importorskip("mujoco")
+    kinds = ["nominal", "joint_friction", "pairs", "disturbance"] if engine == "mujoco" else list(F.FAMILY_KINDS)
+    for kind in kinds:
+        for path, truth in F.make_family(kind, engine, 1, 3, tmp_path, **QUICK):
+            run = _read(path)
+            assert run.arm == "popup-lab" and run.replay == "encoder"
+            assert run.payload_kg == truth["payload_kg"] and list(run.pressure_pa) == truth["pressure_pa"]
+            assert set(run.experiment) == {"format", "arm", "payload_kg", "pressure_pa", "gravity", "replay", "description"}
+            assert F.read_truth(run) == truth and truth["engine"] == engine
+            t = run.time
+            assert t[0] == 0.0 and np.all(np.diff(t) > 0) and abs(t[-1] - 3.0) < 0.01
+            te, qe = run.encoder()
+            assert len(te) == len(t) and np.all(np.isfinite(qe))
+            res = F.encoder_resolution(truth["encoder_bits"])
+            assert np.allclose(qe / res, np.round(qe / res), atol=1e-6)
+            # the declared model replays the run
+            r = run.model().replay(te, qe, sample_rate=truth["rate"])
+            assert np.all(np.isfinite(np.asarray(r.channel("imu2_az"))))
+
+
+def test_variations_are_really_in_the_files(tmp_path):
+    specs = [sp for kind in F.FAMILY_KINDS for sp in F.family_specs(kind, "popup", 4, 0)]
+    assert {sp.rate for sp in specs} == {200.0, 500.0, 1000.0}
+    assert set(sp.channels for sp in specs) == set(F.CHANNEL_SETS)
+    assert {sp.level for sp in specs} == {"near", "above"}
+    assert any(sp.jitter > 0 for sp in specs) and any(sp.jitter == 0 for sp in specs)
+    assert any(sp.dropouts for sp in specs) and not all(sp.dropouts for sp in specs)
+    ns = [sp.noise_scale for sp in specs]
+    assert 0.3 <= min(ns) < 0.5 and 2.0 < max(ns) <= 3.0
+    assert not any(sp.channels == "no_torque" for sp in specs if set(sp.effects) & F.NEEDS_TORQUE)
+    # one run per variation, checked in the file
+    cases = {
+        "plain": dict(rate=500.0, jitter=0.0, channels="full", dropouts=False),
+        "jitter": dict(rate=1000.0, jitter=0.2, channels="full", dropouts=False),
+        "rate200": dict(rate=200.0, jitter=0.0, channels="no_mocap", dropouts=False),
+        "no_torque": dict(rate=500.0, jitter=0.0, channels="no_torque", dropouts=True),
+        "pressure": dict(rate=500.0, jitter=0.0, channels="pressure_noisy", dropouts=True, noise_scale=3.0),
+    }
+    runs = {}
+    for name, ov in cases.items():
+        sp = F.family_specs("payload_mass", "popup", 1, 11, duration=6.0, **ov)[0]
+        sp.family = name
+        runs[name] = _read(F.make_run(sp, tmp_path)[0])
+    dt = np.diff(runs["plain"].time)
+    assert np.allclose(dt, 0.002) and set(runs["plain"].columns) == set(F.MEAS_ORDER[:16])
+    dt = np.diff(runs["jitter"].time)
+    assert dt.std() > 1e-4 and abs(dt.mean() - 1e-3) < 2e-5 and dt.min() > 0
+    assert np.allclose(np.diff(runs["rate200"].time), 0.005)
+    assert not any(c.startswith("ee_") for c in runs["rate200"].columns)
+    assert not any(c.startswith("tau") for c in runs["no_torque"].columns)
+    d = runs["no_torque"].data
+    assert d[["imu1_ax", "imu2_ax"]].isna().any().all() and d["ee_x"].isna().sum() > 5
+    assert not d[["q1", "q2", "q3"]].isna().any().any()
+    p = runs["pressure"]
+    for c, p0 in zip(("p1", "p2"), p.pressure_pa):
+        y = p.channel(c)
+        y = y[np.isfinite(y)]
+        assert abs(y.mean() - p0) < 10 and 40 < y.std() < 60
+    # noise scale: the torque noise of the pressure run is 3 × popup.synth.NOISE (4th differences)
+    y = runs["pressure"].channel("tau1")
+    y = y[np.isfinite(y)]
+    d4 = np.diff(y, 4) / math.sqrt(70)
+    assert 0.8 * 3 * F.NOISE["tau"] < d4.std() < 1.25 * 3 * F.NOISE["tau"]
+
+
+def test_runs_are_deterministic_from_the_seed(tmp_path):
+    a = F.make_family("pairs", "popup", 2, 5, tmp_path / "a", **QUICK)
+    b = F.make_family("pairs", "popup", 2, 5, tmp_path / "b", jobs=2, **QUICK)
+    c = F.make_family("pairs", "popup", 2, 6, tmp_path / "c", **QUICK)
+    for (pa, ta), (pb, tb), (pc, _) in zip(a, b, c):
+        assert ta == tb
+        assert (pa / "measurements.csv").read_bytes() == (pb / "measurements.csv").read_bytes()
+        assert (pa / "measurements.csv").read_bytes() != (pc / "measurements.csv").read_bytes()
+    if importlib.util.find_spec("mujoco") is not None:
+        m1 = F.make_family("sensor_delay", "mujoco", 1, 2, tmp_path / "m1", duration=2.0)[0][0]
+        m2 = F.make_family("sensor_delay", "mujoco", 1, 2, tmp_path / "m2", duration=2.0)[0][0]
+        assert (m1 / "measurements.csv").read_bytes() == (m2 / "measurements.csv").read_bytes()
+
+
+def test_near_runs_are_calibrated_to_a_few_noise_sigmas(tmp_path):
+    for kind in ("joint_friction", "payload_mass", "pressure_leak"):
+        near = [sp for sp in F.family_specs(kind, "popup", 2, 0, duration=6.0) if sp.level == "near"][0]
+        _, truth = F.make_run(near, tmp_path)
+        assert 1.0 < max(truth["effect_sigma"].values()) < 6.0, (kind, truth["effect_sigma"])
+
+
+# ---------------------------------------------------------------------------- the benchmark's classification
+
+
+def _js(history, suspects=(), conclusion="", nominal=10.0):
+    return {"run": "r", "nominal_error": nominal, "error_definition": "x", "noise": {},
+            "suspects": [{"effect": e, "significant": s, "tested": True, "message": "", "score": 1.0, "params": {}, "ci95": {},
+                          "error_after": 1.0} for e, s in suspects],
+            "history": [{"effects": e, "error": err} for e, err in history], "conclusion": conclusion}
+
+
+def test_benchmark_classifies_diagnosis_output():
+    eff = {"kind": "effect", "hidden": ["payload_mass"]}
+    ok = bench.classify(eff, {"rc": 0, "json": _js([([], 10.0), (["payload_mass"], 0.2)], [("payload_mass", True)]), "failure": None})
+    assert ok["ok"] and ok["first_ok"] and ok["halved"] and ok["top_significant"] == "payload_mass"
+    wrong = bench.classify(eff, {"rc": 0, "json": _js([([], 10.0), (["torsion"], 1.0), (["torsion", "payload_mass"], 0.1)]), "failure": None})
+    assert not wrong["ok"] and wrong["halved"] and wrong["added"] == ["torsion", "payload_mass"]
+    small = bench.classify(eff, {"rc": 0, "json": _js([([], 10.0), (["payload_mass"], 6.0)]), "failure": None})
+    assert not small["ok"] and small["first_ok"] and not small["halved"]
+    nom = {"kind": "nominal", "hidden": []}
+    assert bench.classify(nom, {"rc": 0, "json": _js([([], 0.1)]), "failure": None})["ok"]
+    fa = bench.classify(nom, {"rc": 0, "json": _js([([], 0.1), (["air_drag"], 0.05)]), "failure": None})
+    assert fa["false_alarm"] and not fa["ok"]
+    pair = {"kind": "pair", "hidden": ["joint_friction", "payload_mass"]}
+    h = [([], 10.0), (["payload_mass"], 3.0), (["payload_mass", "joint_friction"], 0.1)]
+    assert bench.classify(pair, {"rc": 0, "json": _js(h), "failure": None})["ok"]
+    assert not bench.classify(pair, {"rc": 0, "json": _js(h[:2]), "failure": None})["ok"]
+    dist = {"kind": "disturbance", "hidden": []}
+    text = "A systematic error of 3 noise units is left that is not explained by the library (imu2_az)."
+    assert bench.classify(dist, {"rc": 0, "json": _js([([], 3.0)], conclusion=text), "failure": None})["ok"]
+    assert not bench.classify(dist, {"rc": 0, "json": _js([([], 3.0)], conclusion="at the noise floor"), "failure": None})["ok"]
+    # exit 1: partial results are classified and flagged; exit 2 / garbage: failed
+    inc = bench.classify(eff, {"rc": 1, "json": {**_js([([], 10.0), (["payload_mass"], 1.0)]), "error": "boom"}, "failure": None})
+    assert inc["ok"] and inc["incomplete"]
+    bad = bench.classify(eff, {"rc": 2, "json": None, "failure": "bad input (exit 2): x"})
+    assert bad["ok"] is None and bad["failure"]
+    assert bench._extract_json('progress...\n{"history": []}\n') == {"history": []}
+    assert bench._extract_json("Traceback ...") is None
+    js = _js([([], None), (["payload_mass"], None)], nominal=None)
+    assert bench.classify(eff, {"rc": 0, "json": js, "failure": None})["ok"] is False
+
+
+# ---------------------------------------------------------------------------- the diagnosis (slow)
+
+
+def _diagnosed(path, truth):
+    res = bench.diagnose(path, timeout=1800)
+    assert res["failure"] is None, (res["failure"], res["stderr"][-500:])
+    return bench.classify(truth, res)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("engine,kind", [("mujoco", "payload_mass"), ("mujoco", "joint_friction"), ("popup", "joint_friction")])
+def test_diagnosis_finds_a_hidden_effect_well_above_the_noise(engine, kind, tmp_path):
+    if engine == "mujoco":
+        pytest.importorskip("mujoco")
+    sp = [s for s in F.family_specs(kind, engine, 2, 0, duration=10.0, channels="full") if s.level == "above"][0]
+    path, truth = F.make_run(sp, tmp_path)
+    oc = _diagnosed(path, truth)
+    assert oc["ok"], oc
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("engine", ["popup", "mujoco"])
+def test_diagnosis_raises_no_false_alarm_on_a_nominal_run(engine, tmp_path):
+    if engine == "mujoco":
+        pytest.importorskip("mujoco")
+    sp = F.family_specs("nominal", engine, 1, 0, duration=10.0, channels="full")[0]
+    path, truth = F.make_run(sp, tmp_path)
+    oc = _diagnosed(path, truth)
+    assert oc["ok"], oc
+
+
+@pytest.mark.slow
+def test_diagnosis_leaves_a_mujoco_disturbance_outside_the_library(tmp_path):
+    pytest.importorskip("mujoco")
+    sp = F.family_specs("disturbance", "mujoco", 1, 0, duration=10.0, channels="full")[0]
+    path, truth = F.make_run(sp, tmp_path)
+    oc = _diagnosed(path, truth)
+    assert oc["ok"], oc
+    json.dumps(oc)
