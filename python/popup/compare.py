@@ -13,19 +13,22 @@ how well (and where) the model fits.
 What is computed
 ----------------
 **Replay.** ``replay = "encoder"``: the motor joints follow the measured encoder angles
-(:meth:`MeasuredRun.encoder`, rows with a missing angle skipped) through
-:meth:`Model.replay`; the run starts at rest (bending joints in static equilibrium at
+(:meth:`MeasuredRun.encoder`, rows with a missing angle skipped), smoothed at their
+noise level (:func:`popup.smoothing.smooth_encoder`: a quantised encoder interpolated as
+is would make q̈, and so the torques, noisy), through :meth:`Model.replay`; the run
+starts at rest (bending joints in static equilibrium at
 the first encoder sample) unless ``experiment.toml`` has an ``[initial]`` table with
 the bending angles ``d11 d12 d21 d22`` [rad] and rates ``dd11 dd12 dd21 dd22``
 [rad/s] (or lists ``bending`` / ``bending_rate``, 4 values each). ``replay =
-"reference"`` (closed loop) is refused with :class:`~popup.MeasuredRunError`.
+"reference"``: the controller of the run's ``[controller]`` table tracks the references
+in closed loop.
 
 **Sample rate of the simulation.** The model's output period must be a multiple of its
 step ``dt``. By default the output period is ``k·dt`` with the largest whole ``k`` such
 that the simulated rate ``1/(k·dt)`` is at least the run's mean rate
 ``(N − 1)/(t_N − t_1)`` (so a 500 Hz run with ``dt = 1 ms`` is simulated at 500 Hz, a
-300 Hz run at 500 Hz); a run sampled faster than ``1/dt`` is simulated at ``1/dt``.
-``sample_rate=`` overrides it.
+300 Hz run at 500 Hz); a run sampled faster than ``1/dt``, or whose stamps are not on
+that grid (jitter), is simulated at every step ``1/dt``. ``sample_rate=`` overrides it.
 
 **Alignment.** The simulation is interpolated linearly onto the measured time stamps;
 the measured data is never modified. Measured samples outside the simulated time span
@@ -34,7 +37,8 @@ says what was done.
 
 **Channels.** Every measured column that the simulation also produces, except ``t``,
 the replay inputs (``q1..q3``) and their spline derivatives (``dq1..dq3``), and the
-pressures ``p1 p2`` unless the measured pressure varies. For an encoder replay the
+pressures ``p1 p2`` when they are constant (a pressure that only carries sensor noise is
+compared: it sits at its noise floor, ``at_noise_floor``, and adds nothing to the error). For an encoder replay the
 default set is ``tau1..3, ee_x..z, imu1_a*, imu2_a*``. ``channels=`` overrides it (any
 channel both sides have; comparing ``q``/``dq`` is allowed and noted).
 
