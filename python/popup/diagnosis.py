@@ -647,14 +647,14 @@ class _Fitted:
 
 def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str, Any]], only: Optional[Sequence[str]], start: Optional[Dict[str, List[float]]],
                    extra_seeds: Optional[List[Dict[str, Any]]], max_iter: int, variant: str = "",
-                   also: Optional[List[Tuple[fx.EffectParam, int]]] = None) -> Tuple[_Fitted, str]:
+                   also: Optional[List[Tuple[fx.EffectParam, int]]] = None, stiffest: Optional[Dict[str, Any]] = None) -> Tuple[_Fitted, str]:
     model = prob.model
     m = model
     note = ""
     pb, z_base = prob, prob.residuals(prob.nominal_simulation())
     if structure is not None:
         m = model.with_effect(name, **structure)
-        check = m.with_effect(name, **_STIFFEST.get(name, {}))
+        check = m.with_effect(name, **(stiffest if stiffest is not None else _STIFFEST.get(name, {})))
         dt = _step_for(prob, m, check)
         if dt < model.dt * (1 - 1e-12):
             m = m.with_dt(dt)
@@ -710,7 +710,14 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
                 if var.get("extra"):
                     only = sorted({p.name for p, _ in fitted.free} | set(var["extra"]))
                     start = {k: v for k, v in base_params.items() if k in only and k not in var["extra"]}
-                vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also)
+                # a structural variant starts from the base fit: its step is set for 1.5 × the
+                # base's stiffness, not the whole plausible range (3 segments at k_scale 5 would
+                # need a 14 × smaller step)
+                stiff = {k: [min(1.5 * x, est.BOUNDS.get((name, k), (0.0, math.inf))[1]) for x in base_params[k]]
+                         for k in _STIFFEST.get(name, {}) if k in base_params} if var.get("structure") else None
+                if var.get("structure") and stiff:
+                    start = {k: base_params[k] for k in stiff}
+                vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also, stiffest=stiff)
             except Exception as e:  # noqa: BLE001
                 notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
                 continue
