@@ -33,7 +33,7 @@ from .io import MeasuredRun, read_run, write_run
 from . import mcaplog
 from .mcaplog import RunLog, read_log
 from .results import CHANNELS, UNITS, BatchResult, SimResult, WrinkleAlarm
-from . import noise, problem, estimate
+from . import noise, problem, estimate, smoothing
 from .problem import ReplayProblem
 from .diagnosis import Diagnosis, History, Suspect, diagnose, improve
 from .fit import FitResult, fit_params
@@ -70,6 +70,7 @@ __all__ = [
     "problem",
     "noise",
     "estimate",
+    "smoothing",
     "effects",
     "diagnose",
     "improve",
