@@ -122,13 +122,15 @@ _STRUCTURE: Dict[str, Dict[str, Any]] = {
 }
 _STIFFEST: Dict[str, Dict[str, Any]] = {
     "higher_bending_modes": {"k_scale": [5.0, 5.0]},
-    "torsion": {"k_t": [1000.0, 1000.0], "c_t": [2.0, 2.0]},
+    "torsion": {"k_t": [est.BOUNDS[("torsion", "k_t")][1]] * 2, "c_t": [2.0, 2.0]},
 }
 
 VARIANTS: Dict[str, List[Dict[str, Any]]] = {
     "joint_friction": [{"name": "Stribeck", "extra": ["tau_s", "v_s"], "seeds": [{"tau_s": 0.5, "v_s": 0.05}, {"tau_s": 1.5, "v_s": 0.1}, {"tau_s": 1.0, "v_s": 0.02}]}],
     "higher_bending_modes": [{"name": "3 segments", "structure": {"segments": [3.0, 3.0]}}],
     "payload_mass": [{"name": "centre-of-mass offset", "extra": ["com_offset_m"]}],
+    "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
+                {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
 }
 """Richer variants tried when an effect is significant: ``extra`` parameters fitted with
 the base ones (from the base fit), or another ``structure``."""
@@ -574,8 +576,6 @@ def _x0(prob: ReplayProblem, free: List[Tuple[fx.EffectParam, int]], base_flat: 
                 v = float(np.median(top))
             else:
                 v = 1e3
-        elif p.effect == "torsion" and p.name == "k_t" and not math.isfinite(v):
-            v = 200.0
         x0.append(v)
     return np.array(x0, dtype=float)
 
@@ -591,6 +591,15 @@ def _candidates(effect: str, prob: ReplayProblem, free: List[Tuple[fx.EffectPara
             x[k] = x0[k]
             cands.append(x)
     return cands
+
+
+def _absent_entries(structure: Optional[Dict[str, Any]]) -> set:
+    """Joint/link entries a structure leaves out (an infinite stiffness: that link rigid)."""
+    out = set()
+    for v in (structure or {}).values():
+        if isinstance(v, (list, tuple)):
+            out.update(i for i, x in enumerate(v) if isinstance(x, float) and math.isinf(x))
+    return out
 
 
 def _step_for(prob: ReplayProblem, m: "Model", check: "Model") -> float:
@@ -663,10 +672,17 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
             note = f"run at dt = {dt:.3g} s (its structure's stability limit; the nominal model re-run at the same step)"
     p = pb.with_model(m) if m is not pb.model else pb
     free = est.free_params(name, only)
+    absent = _absent_entries(structure)
+    free = [(q, i) for q, i in free if i not in absent]
     flat = m.effects_flat.copy()
     if start:
         for k, v in start.items():
-            flat[fx.EFFECTS[name].params[k].slice] = v
+            sl = fx.EFFECTS[name].params[k].slice
+            keep = flat[sl].copy()
+            flat[sl] = v
+            for i in absent:  # an entry the structure leaves out keeps the structure's value
+                if i < len(keep):
+                    flat[sl.start + i] = keep[i]
     x0 = np.array([flat[q.offset + i] for q, i in free]) if start else _x0(p, free, flat)
     cands = _candidates(name, p, free, flat, x0, extra_seeds)
     # the effects added in earlier rounds are refitted with the candidate (forward

@@ -27,6 +27,11 @@ and condition number, the correlations between parameters, parameters at a bound
 parameters whose interval is wider than their own scale. Such parameters are listed as
 not identifiable from this run (their interval is reported as ``inf``), instead of a
 tight local interval the data cannot support.
+
+Parameters that span decades (:data:`LOG_PARAMS`, e.g. a torsional stiffness from a
+soft 5 N·m/rad to a nearly rigid 1.5e4 N·m/rad) are fitted as their logarithm (steps and
+trust region in e-folds); values, intervals and the returned Jacobian are in the
+parameter's own units.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ __all__ = [
     "PARAM_SCALE",
     "SEEDS",
     "BOUNDS",
+    "LOG_PARAMS",
     "FitOutcome",
     "free_params",
     "params_dict",
@@ -62,7 +68,7 @@ PARAM_SCALE: Dict[Tuple[str, str], float] = {
     ("joint_friction", "b"): 0.5,
     ("joint_friction", "tau_s"): 1.0,
     ("joint_friction", "v_s"): 0.05,
-    ("backlash", "gap"): 0.01,
+    ("backlash", "gap"): 1e-3,
     ("higher_bending_modes", "k_scale"): 0.5,
     ("higher_bending_modes", "e_pa"): 1e8,
     ("higher_bending_modes", "lambda_s"): 1e-4,
@@ -77,7 +83,7 @@ PARAM_SCALE: Dict[Tuple[str, str], float] = {
     ("sensor_delay", "mocap"): 0.005,
     ("actuator_saturation", "tau_max"): 2.0,
     ("air_drag", "cd"): 1.0,
-    ("torsion", "k_t"): 100.0,
+    ("torsion", "k_t"): 100.0,  # fitted as ln k_t (LOG_PARAMS)
     ("torsion", "c_t"): 0.5,
 }
 
@@ -86,14 +92,17 @@ PARAM_SCALE: Dict[Tuple[str, str], float] = {
 #: number applies to every joint/link entry of the parameter, a list gives one per entry.
 SEEDS: Dict[str, List[Dict[str, Any]]] = {
     "joint_friction": [{"tau_c": 0.5, "b": 0.1}, {"tau_c": 2.0, "b": 0.5}, {"tau_c": 0.2, "b": 1.0}],
-    "backlash": [{"gap": 0.005}, {"gap": 0.02}, {"gap": 0.05}],
+    "backlash": [{"gap": g} for g in (1e-4, 3e-4, 1e-3, 3e-3, 0.01, 0.03)],
     "pressure_leak": [{"rate": 0.005}, {"rate": 0.05}],
     "wrinkling": [{"ratio": r, "mw_scale": m} for r in (0.3, 0.6) for m in (0.4, 0.7, 1.0)],
     "payload_mass": [{"delta_kg": d} for d in (-1.0, -0.6, -0.3, -0.15, 0.15, 0.3, 0.6, 1.0, 1.5)],
     "sensor_delay": [{"imu": d, "torque": d, "mocap": d} for d in (0.003, 0.01, 0.02, 0.05)],
     "air_drag": [{"cd": 1.0}, {"cd": 5.0}, {"cd": 20.0}],
-    # one link compliant, the other near rigid (the upper bound), or both
-    "torsion": [{"k_t": [k1, k2], "c_t": 0.2} for k1, k2 in ((50.0, 1000.0), (150.0, 1000.0), (400.0, 1000.0), (1000.0, 50.0), (1000.0, 150.0), (1000.0, 400.0), (100.0, 100.0), (300.0, 300.0))],
+    # one link compliant, the other nearly rigid (the upper bound), or both; soft to stiff
+    # (an entry a structure makes rigid is not fitted: diagnosis's one-link variants)
+    "torsion": [{"k_t": [k1, k2], "c_t": 0.2} for k1, k2 in
+                [(k, math.inf) for k in (50.0, 200.0, 800.0, 3000.0, 10000.0)] + [(math.inf, k) for k in (50.0, 200.0, 800.0, 3000.0, 10000.0)]
+                + [(100.0, 100.0), (500.0, 500.0), (3000.0, 3000.0)]],
     "higher_bending_modes": [{"k_scale": [a, b]} for a, b in ((0.5, 0.5), (1.0, 1.0), (2.0, 2.0), (1.0, 3.0), (3.0, 1.0))],
 }
 
@@ -102,12 +111,19 @@ SEEDS: Dict[str, List[Dict[str, Any]]] = {
 #: configurations that need a much smaller step (a torsional damper of 10⁴ N·m·s/rad is an
 #: overdamped, stiff mode; the diagnosis would spend its time on it).
 BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
-    ("torsion", "k_t"): (5.0, 1000.0),
+    ("torsion", "k_t"): (5.0, 1.5e4),
     ("torsion", "c_t"): (0.0, 2.0),
     ("higher_bending_modes", "k_scale"): (0.1, 5.0),
 }
 
+#: Positive parameters fitted as their logarithm (module docs).
+LOG_PARAMS = {("torsion", "k_t")}
+
 _NUDGE = 0.2
+
+
+def _is_log(p: fx.EffectParam) -> bool:
+    return (p.effect, p.name) in LOG_PARAMS
 
 
 @dataclass
@@ -162,22 +178,35 @@ def fit(
     from scipy.optimize import least_squares
 
     train = prob.train if mask is None else mask
-    lo = np.array([p.lower for p, _ in free])
-    hi = np.array([p.upper for p, _ in free])
-    sc = np.array([PARAM_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, dtype=float)
+    lg = np.array([_is_log(p) for p, _ in free], dtype=bool)
+    lo_v = np.array([p.lower for p, _ in free])
+    hi_v = np.array([p.upper for p, _ in free])
+    sc_v = np.array([PARAM_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, dtype=float)
+    # the solver's variables: ln v for LOG_PARAMS entries (scale: one e-fold), else v
+
+    def to_s(v: np.ndarray) -> np.ndarray:
+        v = np.asarray(v, dtype=float)
+        return np.where(lg, np.log(np.where(lg, np.clip(v, 1e-300, 1e300), 1.0)), v)
+
+    def to_v(x: np.ndarray) -> np.ndarray:
+        return np.where(lg, np.exp(np.where(lg, x, 0.0)), x)
+
+    lo, hi = to_s(lo_v), to_s(hi_v)
+    sc = np.where(lg, 1.0, sc_v)
+
     idx = np.array([p.offset + i for p, i in free], dtype=int)
     # a start on a bound stalls the trust-region-reflective steps (their scaling is the
     # distance to the bound): start a fraction of the typical scale inside
     fin_lo = np.where(np.isfinite(lo), lo, -1e300)
     fin_hi = np.where(np.isfinite(hi), hi, 1e300)
     nudge = np.minimum(_NUDGE * sc, 0.5 * (fin_hi - fin_lo))
-    x0 = np.clip(np.asarray(x0, dtype=float), fin_lo + nudge, fin_hi - nudge)
+    x0 = np.clip(to_s(np.asarray(x0, dtype=float)), fin_lo + nudge, fin_hi - nudge)
     cache: Dict[bytes, np.ndarray] = {}
     n0 = prob.nfev
 
     def flat_of(x: np.ndarray) -> np.ndarray:
         f = np.array(base_flat, dtype=float)
-        f[idx] = x
+        f[idx] = to_v(x)
         return f
 
     def eval_batch(xs: List[np.ndarray]) -> List[np.ndarray]:
@@ -233,7 +262,10 @@ def fit(
     z = eval_batch([x])[0]
     ms, _, _ = prob.channel_stats(z, train)
     w = _weights(ms)
-    return FitOutcome(x=x, flat=flat_of(x), z=z, J=_jac(x, w), weights=w, nfev=prob.nfev - n0)
+    v = to_v(x)
+    # the Jacobian in the parameters' own units: d/dv = (1/v) d/d(ln v)
+    dsdv = np.where(lg, 1.0 / np.where(lg, v, 1.0), 1.0)
+    return FitOutcome(x=v, flat=flat_of(x), z=z, J=_jac(x, w) * dsdv[None, :], weights=w, nfev=prob.nfev - n0)
 
 
 def seed_points(effect: str, free: List[Tuple[fx.EffectParam, int]], x0: np.ndarray, extra: Optional[List[Dict[str, Any]]] = None) -> List[np.ndarray]:
