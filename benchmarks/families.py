@@ -273,6 +273,7 @@ class RunSpec:
     amplitude: float = 1.0
     wrinkle_poses: bool = False
     noise_scale: float = 1.0
+    noise_lowpass_hz: float = 0.0  # IMU and torque noise through a 1-pole low-pass (0: white)
     encoder_bits: int = 14
     channels: str = "full"
     dropouts: bool = False
@@ -948,9 +949,20 @@ def encoder_resolution(bits: int) -> float:
     return 2 * math.pi / (2**int(bits) * 100)
 
 
+def _lowpassed(e: np.ndarray, fc: float, rate: float, sd: float) -> np.ndarray:
+    """White noise ``e`` through a 1-pole low-pass at ``fc`` [Hz] (sampled at ``rate``), scaled
+    back to standard deviation ``sd`` (coloured noise of the same size)."""
+    from scipy.signal import butter, lfilter
+
+    b, a = butter(1, min(fc / (rate / 2), 0.95))
+    f = lfilter(b, a, np.concatenate([e[::-1][:2000], e]))[min(2000, e.size):]
+    return f * (sd / max(float(np.std(f)), 1e-300))
+
+
 def measure(clean: Mapping[str, np.ndarray], spec: RunSpec, rng: np.random.Generator) -> Dict[str, np.ndarray]:
     """The lab's view of the noise-free channels: white Gaussian noise per group
-    (``popup.synth.NOISE`` × ``noise_scale``), quantised encoders, the channel set
+    (``popup.synth.NOISE`` × ``noise_scale``; IMU and torque noise coloured by a 1-pole
+    low-pass at ``noise_lowpass_hz`` when set), quantised encoders, the channel set
     (``full``, ``no_mocap``, ``no_torque``, ``pressure_noisy`` = full + p1 p2 with 50 Pa
     noise), NaN dropouts (mocap occlusion bursts of 20-200 ms, single IMU and torque
     packets lost)."""
@@ -965,7 +977,10 @@ def measure(clean: Mapping[str, np.ndarray], spec: RunSpec, rng: np.random.Gener
     for g, cols in groups.items():
         sd = NOISE[g] * spec.noise_scale
         for c in cols:
-            out[c] = np.asarray(clean[c], dtype=float) + rng.normal(0.0, sd, n)
+            e = rng.normal(0.0, sd, n)
+            if spec.noise_lowpass_hz > 0 and g in ("imu", "tau"):
+                e = _lowpassed(e, spec.noise_lowpass_hz, spec.rate, sd)
+            out[c] = np.asarray(clean[c], dtype=float) + e
     if spec.channels == "pressure_noisy":
         for c in ("p1", "p2"):
             out[c] = np.asarray(clean[c], dtype=float) + rng.normal(0.0, PRESSURE_NOISE_PA, n)
@@ -1258,6 +1273,9 @@ def family_specs(kind: str, engine: str, n: int, seed: int, **overrides: Any) ->
         sp.amplitude = _r(rng.uniform(0.7, 1.2))
         sp.noise_scale = _r(math.exp(rng.uniform(math.log(0.3), math.log(3.0))))
         sp.encoder_bits = int(rng.choice([12, 14, 16]))
+        # a third of the runs: coloured IMU/torque noise (a sensor front-end's low-pass)
+        rn = _rng(seed, engine, kind, i, "noise")
+        sp.noise_lowpass_hz = _r(rn.uniform(20.0, 0.3 * sp.rate if sp.rate < 300 else 100.0)) if rn.random() < 1 / 3 else 0.0
         if "wrinkling" in names:
             sp.payload_kg = float(rng.choice([1.5, 2.0]))
             sp.pressure_pa = (float(np.round(rng.uniform(20e3, 28e3), -2)), float(np.round(rng.uniform(20e3, 28e3), -2)))

@@ -133,6 +133,7 @@ def test_variations_are_really_in_the_files(tmp_path):
     assert any(sp.dropouts for sp in specs) and not all(sp.dropouts for sp in specs)
     ns = [sp.noise_scale for sp in specs]
     assert 0.3 <= min(ns) < 0.5 and 2.0 < max(ns) <= 3.0
+    assert any(sp.noise_lowpass_hz > 0 for sp in specs) and any(sp.noise_lowpass_hz == 0 for sp in specs)
     assert not any(sp.channels == "no_torque" for sp in specs if set(sp.effects) & F.NEEDS_TORQUE)
     # one run per variation, checked in the file
     cases = {
@@ -140,7 +141,8 @@ def test_variations_are_really_in_the_files(tmp_path):
         "jitter": dict(rate=1000.0, jitter=0.2, channels="full", dropouts=False),
         "rate200": dict(rate=200.0, jitter=0.0, channels="no_mocap", dropouts=False),
         "no_torque": dict(rate=500.0, jitter=0.0, channels="no_torque", dropouts=True),
-        "pressure": dict(rate=500.0, jitter=0.0, channels="pressure_noisy", dropouts=True, noise_scale=3.0),
+        "pressure": dict(rate=500.0, jitter=0.0, channels="pressure_noisy", dropouts=True, noise_scale=3.0, noise_lowpass_hz=0.0),
+        "coloured": dict(rate=500.0, jitter=0.0, channels="full", dropouts=False, noise_scale=1.0, noise_lowpass_hz=30.0),
     }
     runs = {}
     for name, ov in cases.items():
@@ -167,6 +169,15 @@ def test_variations_are_really_in_the_files(tmp_path):
     y = y[np.isfinite(y)]
     d4 = np.diff(y, 4) / math.sqrt(70)
     assert 0.8 * 3 * F.NOISE["tau"] < d4.std() < 1.25 * 3 * F.NOISE["tau"]
+    # coloured noise: neighbouring samples see a fraction of it, the stride search all of it
+    from popup.noise import CORRELATION_S, noise_std
+
+    c = runs["coloured"]
+    y, t = c.channel("imu2_ax"), c.time
+    smooth = np.convolve(y, np.ones(101) / 101, mode="same")  # the signal, roughly
+    e = (y - smooth)[200:-200]
+    assert noise_std(t[200:-200], e) < 0.6 * F.NOISE["imu"]
+    assert 0.8 * F.NOISE["imu"] < noise_std(t[200:-200], e, correlation_s=CORRELATION_S) < 1.25 * F.NOISE["imu"]
 
 
 def test_runs_are_deterministic_from_the_seed(tmp_path):
@@ -251,12 +262,14 @@ def test_diagnosis_finds_a_hidden_effect_well_above_the_noise(engine, kind, tmp_
     assert oc["ok"], oc
 
 
-# the MuJoCo nominal run is in CI (about half a minute): no false alarm on another engine's data
+# the MuJoCo nominal run is in CI (1-2 minutes): no false alarm on another engine's data,
+# with the IMU and torque noise coloured by a sensor low-pass (a white-noise floor estimate
+# would put those channels at 3-4 × their noise)
 @pytest.mark.parametrize("engine", [pytest.param("popup", marks=pytest.mark.slow), "mujoco"])
 def test_diagnosis_raises_no_false_alarm_on_a_nominal_run(engine, tmp_path):
     if engine == "mujoco":
         pytest.importorskip("mujoco")
-    sp = F.family_specs("nominal", engine, 1, 0, duration=10.0, channels="full")[0]
+    sp = F.family_specs("nominal", engine, 1, 0, duration=10.0, channels="full", noise_lowpass_hz=35.0)[0]
     path, truth = F.make_run(sp, tmp_path)
     oc = _diagnosed(path, truth)
     assert oc["ok"], oc

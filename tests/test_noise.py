@@ -61,3 +61,45 @@ def test_sparse_jumps_do_not_inflate_the_floor():
     y = 1.5 * np.sign(np.sin(2 * math.pi * 0.7 * t)) + rng.normal(0, 0.05, t.size)
     assert noise_std(t, y) == pytest.approx(0.05, rel=0.05)
     assert noise_std(t, y, robust=False) > 1.5 * 0.05
+
+
+@pytest.mark.parametrize("rate", [200.0, 500.0, 1000.0])
+def test_coloured_noise_of_a_sensor_low_pass_is_found(rate):
+    """A sensor's own 1-pole low-pass (20-100 Hz, below Nyquist) colours its noise: the
+    neighbouring-sample estimate sees a fraction of it, the stride search the whole (on a
+    model's residual: noise plus a slow systematic error)."""
+    from scipy.signal import butter, lfilter
+
+    rng = np.random.default_rng(int(rate) + 11)
+    found, plain = [], []
+    for k in range(12):
+        n = int(20 * rate)
+        t = np.arange(n) / rate
+        fc = float(rng.uniform(20.0, min(100.0, 0.3 * rate)))
+        b, a = butter(1, fc / (rate / 2))
+        e = lfilter(b, a, rng.normal(size=n + 2000))[2000:]
+        sigma = 10 ** rng.uniform(-3, 0)
+        e *= sigma / e.std()
+        # a model's residual: a systematic error of up to 20 noise sigmas at 0.1-5 Hz
+        y = sigma * rng.uniform(0.0, 20.0) * _signal(t, rng, fmax=5.0) / 3.0 + e
+        found.append(noise_std(t, y, correlation_s=0.05) / sigma)
+        plain.append(noise_std(t, y) / sigma)
+    found, plain = np.array(found), np.array(plain)
+    assert np.all((found > 0.8) & (found < 1.25)), found
+    assert np.all(plain < 0.75), plain
+
+
+@pytest.mark.parametrize("rate", [200.0, 500.0, 1000.0])
+def test_stride_search_leaves_white_noise_and_fast_systematic_errors_alone(rate):
+    rng = np.random.default_rng(int(rate) + 12)
+    for k in range(10):
+        n = int(15 * rate)
+        t = np.arange(n) / rate
+        sigma = 10 ** rng.uniform(-3, 0)
+        e = rng.normal(0, sigma, n)
+        # a ringing systematic error of 3-30 noise sigmas at 2-15 Hz
+        f = rng.uniform(2.0, 15.0)
+        ring = sigma * rng.uniform(3, 30) * np.sin(2 * math.pi * f * t) * np.exp(-0.2 * t)
+        y = _signal(t, rng, fmax=0.02 * rate) + ring + e
+        assert noise_std(t, y, correlation_s=0.05) == noise_std(t, y)
+        assert noise_std(t, y) == pytest.approx(sigma, rel=0.1)

@@ -19,7 +19,8 @@ What it holds (set up once, reused by every fit):
   :func:`popup.smoothing.smooth_encoder` (a quantised or noisy encoder interpolated as is
   makes q̈, and so the torques, noisy: the replay would sit above the noise floor).
 * **Noise floor** σ_c of each channel (:func:`popup.noise.noise_std` of the nominal
-  model's residual: divided differences remove the smooth systematic part).
+  model's residual: divided differences remove the smooth systematic part; strides up
+  to :data:`popup.noise.CORRELATION_S` find noise coloured by a sensor's low-pass).
 * **Training and validation samples**: the run cut in :data:`N_BLOCKS` equal time
   blocks; blocks :data:`VALIDATION_BLOCKS` are held out (30 %, spread over the run so
   that they see every kind of excitation). Fits use the training samples; an effect is
@@ -45,7 +46,7 @@ import numpy as np
 
 from .exceptions import InputError, MeasuredRunError, StepTooLargeError
 from .io import MeasuredRun
-from .noise import noise_std
+from .noise import CORRELATION_S, noise_std
 from .results import CHANNELS
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -574,9 +575,9 @@ def systematic(ms: np.ndarray) -> float:
 
 
 def _floor_of(t: np.ndarray, resid: np.ndarray, y: np.ndarray) -> float:
-    s = noise_std(t, resid)
+    s = noise_std(t, resid, correlation_s=CORRELATION_S)
     if not (math.isfinite(s) and s > 0):
-        s = noise_std(t, y)
+        s = noise_std(t, y, correlation_s=CORRELATION_S)
     return s if math.isfinite(s) else 0.0
 
 
