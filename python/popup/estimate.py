@@ -21,8 +21,9 @@ c's residual after the fit: a free-run residual is not n independent samples).
 
 Intervals and identifiability (:func:`uncertainty`)
 --------------------------------------------------
-Gauss–Newton covariance ``s² (JᵀJ)⁻¹`` of the weighted problem, inflated by ``n/n_eff``;
-95 % half-widths. Before reporting them, the scaled Fisher matrix is checked: its rank
+Gauss–Newton covariance ``s² (JᵀJ)⁻¹`` of the weighted problem, inflated by ``n/n_eff``,
+or the delete-one-block jackknife variance over :data:`JACKKNIFE_BLOCKS` time blocks
+where that is larger (a residual that is not white everywhere); 95 % half-widths. Before reporting them, the scaled Fisher matrix is checked: its rank
 and condition number, the correlations between parameters, parameters at a bound and
 parameters whose interval is wider than their own scale. Such parameters are listed as
 not identifiable from this run (their interval is reported as ``inf``), instead of a
@@ -138,6 +139,8 @@ class FitOutcome:
     weights: np.ndarray
     nfev: int
     starts: List[np.ndarray] = field(default_factory=list)
+    r: np.ndarray = field(default_factory=lambda: np.zeros(0))  # weighted training residual (rows of J)
+    row_t: np.ndarray = field(default_factory=lambda: np.zeros(0))  # time [s] of each row of J
     start_values: List[float] = field(default_factory=list)
 
 
@@ -265,7 +268,9 @@ def fit(
     v = to_v(x)
     # the Jacobian in the parameters' own units: d/dv = (1/v) d/d(ln v)
     dsdv = np.where(lg, 1.0 / np.where(lg, v, 1.0), 1.0)
-    return FitOutcome(x=v, flat=flat_of(x), z=z, J=_jac(x, w) * dsdv[None, :], weights=w, nfev=prob.nfev - n0)
+    J = _jac(x, w) * dsdv[None, :]
+    row_t = np.repeat(np.asarray(prob.time, dtype=float)[train], z.shape[1])
+    return FitOutcome(x=v, flat=flat_of(x), z=z, J=J, weights=w, nfev=prob.nfev - n0, r=vec(z, w), row_t=row_t)
 
 
 def seed_points(effect: str, free: List[Tuple[fx.EffectParam, int]], x0: np.ndarray, extra: Optional[List[Dict[str, Any]]] = None) -> List[np.ndarray]:
@@ -316,6 +321,44 @@ def log_ratio(prob: ReplayProblem, z_before: np.ndarray, z_after: np.ndarray, ma
     return lr, max(float(np.sum(ne)), 1.0)
 
 
+#: Contiguous time blocks of the training rows deleted in turn by the jackknife.
+JACKKNIFE_BLOCKS = 20
+
+
+def _jackknife_var(Js: np.ndarray, r: np.ndarray, row_t: np.ndarray) -> np.ndarray:
+    """Delete-one-block jackknife variances of the (scaled) parameters from one
+    Gauss-Newton step per block: δ_b = (A − A_b)⁻¹ J_bᵀ r_b (Jᵀr = 0 at the optimum),
+    V = (B − 1)/B Σ_b (δ_b − δ̄)² (scaled to the Student-t point of B − 1 degrees of
+    freedom). Zeros when the rows are not known."""
+    k = Js.shape[1]
+    if k == 0 or r.size != Js.shape[0] or row_t.size != Js.shape[0]:
+        return np.zeros(k)
+    edges = np.quantile(row_t, np.linspace(0.0, 1.0, JACKKNIFE_BLOCKS + 1))
+    b = np.clip(np.searchsorted(edges, row_t, side="right") - 1, 0, JACKKNIFE_BLOCKS - 1)
+    A = Js.T @ Js
+    deltas = []
+    for i in range(JACKKNIFE_BLOCKS):
+        m = b == i
+        if not m.any():
+            continue
+        Jb = Js[m]
+        try:
+            deltas.append(np.linalg.lstsq(A - Jb.T @ Jb, Jb.T @ r[m], rcond=None)[0])
+        except np.linalg.LinAlgError:
+            return np.zeros(k)
+    if len(deltas) < 3:
+        return np.zeros(k)
+    d = np.array(deltas)
+    B = d.shape[0]
+    v = (B - 1) / B * np.sum((d - d.mean(axis=0)) ** 2, axis=0)
+    # a variance from B blocks has B − 1 degrees of freedom: scaled so that 1.96 σ is the
+    # Student-t 97.5 % point
+    from scipy.stats import t as student_t
+
+    v = v * (float(student_t.ppf(0.975, B - 1)) / 1.96) ** 2
+    return np.where(np.isfinite(v), v, 0.0)
+
+
 def uncertainty(
     outcome: FitOutcome,
     free: List[Tuple[fx.EffectParam, int]],
@@ -343,6 +386,10 @@ def uncertainty(
     except np.linalg.LinAlgError:
         cov_s = np.full((k, k), np.inf)
     var = np.clip(np.diag(cov_s), 0.0, None)
+    # a block jackknife (one Gauss-Newton step per deleted block of time) as well: it sees
+    # what the Gauss-Newton covariance assumes away (a residual that is not white noise
+    # everywhere, a model error that varies along the run); the wider of the two is kept
+    var = np.maximum(var, _jackknife_var(Js, outcome.r, outcome.row_t))
     half = 1.96 * np.sqrt(var) * sc
     d = np.sqrt(np.where(var > 0, var, np.nan))
     corr = cov_s / np.outer(d, d)
