@@ -146,7 +146,15 @@ def classify(truth: Dict[str, Any], res: Dict[str, Any]) -> Dict[str, Any]:
     concl = str(js.get("conclusion", ""))
     out.update(added=added, first=first, top_significant=sig[0] if sig else None, nominal_error=nom, min_error=emin,
                halved=halved, conclusion=concl[:600], error=js.get("error"))
-    if kind == "effect":
+    es = [v for v in (_f(x) for x in (truth.get("effect_sigma") or {}).values()) if math.isfinite(v)]
+    if kind == "effect" and es and max(es) < DETECTABLE_SIGMA:
+        # the generator could not make this run's effect visible (e.g. a saturation the
+        # excitation never reached): no method can find it; counted apart, and right when
+        # nothing else is blamed for it
+        out["kind"] = "undetectable"
+        out["first_ok"] = first in (None, hidden[0])
+        out["ok"] = bool(out["first_ok"])
+    elif kind == "effect":
         out["first_ok"] = first == hidden[0]
         out["ok"] = bool(out["first_ok"] and halved)
     elif kind == "nominal":
@@ -169,7 +177,12 @@ CRITERION = {
     "nominal": "(b) no false alarm (nothing added)",
     "pair": "(c) both effects added within two rounds",
     "disturbance": "(d) nothing added AND conclusion: not explained by the library",
+    "undetectable": "(e) effect below 1 noise sigma in every channel: nothing else blamed",
 }
+
+#: A hidden effect that moves no channel group by this many noise sigmas (RMS, the truth's
+#: ``effect_sigma``) is below detectability: counted under (e), not (a).
+DETECTABLE_SIGMA = 1.0
 
 
 def _frac(a: int, b: int) -> str:
@@ -200,7 +213,7 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
                         "above": [sum(1 for r in lv["above"] if r["outcome"]["ok"]), len(lv["above"])]}
     lines.append("")
     counts: Dict[str, Any] = {}
-    for kind in ("effect", "nominal", "pair", "disturbance"):
+    for kind in ("effect", "nominal", "pair", "disturbance", "undetectable"):
         g = [r for r in rs if r["outcome"]["kind"] == kind]
         if not g:
             continue

@@ -1274,7 +1274,7 @@ def family_specs(kind: str, engine: str, n: int, seed: int, **overrides: Any) ->
         sp.noise_scale = _r(math.exp(rng.uniform(math.log(0.3), math.log(3.0))))
         sp.encoder_bits = int(rng.choice([12, 14, 16]))
         # a third of the runs: coloured IMU/torque noise (a sensor front-end's low-pass)
-        rn = _rng(seed, engine, kind, i, "noise")
+        rn = _rng(seed, engine, kind, i, "noise_colour")
         sp.noise_lowpass_hz = _r(rn.uniform(20.0, 0.3 * sp.rate if sp.rate < 300 else 100.0)) if rn.random() < 1 / 3 else 0.0
         if "wrinkling" in names:
             sp.payload_kg = float(rng.choice([1.5, 2.0]))

@@ -219,6 +219,15 @@ def test_benchmark_classifies_diagnosis_output():
     assert not wrong["ok"] and wrong["halved"] and wrong["added"] == ["torsion", "payload_mass"]
     small = bench.classify(eff, {"rc": 0, "json": _js([([], 10.0), (["payload_mass"], 6.0)]), "failure": None})
     assert not small["ok"] and small["first_ok"] and not small["halved"]
+    # an effect the generator could not make visible (below 1 noise sigma everywhere) is
+    # counted apart: right when nothing else is blamed
+    faint = {"kind": "effect", "hidden": ["actuator_saturation"], "effect_sigma": {"tau": 0.04, "imu": 1e-4}}
+    un = bench.classify(faint, {"rc": 0, "json": _js([([], 0.0)]), "failure": None})
+    assert un["kind"] == "undetectable" and un["ok"]
+    blamed = bench.classify(faint, {"rc": 0, "json": _js([([], 0.5), (["air_drag"], 0.1)]), "failure": None})
+    assert blamed["kind"] == "undetectable" and not blamed["ok"]
+    seen = bench.classify({**faint, "effect_sigma": {"tau": 2.5}}, {"rc": 0, "json": _js([([], 0.0)]), "failure": None})
+    assert seen["kind"] == "effect" and not seen["ok"]
     nom = {"kind": "nominal", "hidden": []}
     assert bench.classify(nom, {"rc": 0, "json": _js([([], 0.1)]), "failure": None})["ok"]
     fa = bench.classify(nom, {"rc": 0, "json": _js([([], 0.1), (["air_drag"], 0.05)]), "failure": None})
