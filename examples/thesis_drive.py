@@ -326,19 +326,78 @@ def fit(cases: Sequence[Case], base: Drive, names: Sequence[str] = ("a", "b", "o
     return Fit(d, list(names), np.exp(sol.x), ci, list(cases), ours, float(sol.cost))
 
 
+def motor_cases(ki_rule: str = "ratio") -> List[Case]:
+    """Tables 8 and 9 only (the motoreducer alone)."""
+    return [c for c in cases_t5_9(ki_rule) if c.name.startswith(("T8", "T9"))]
+
+
+def rigid_cases(gravity: bool = True) -> List[Case]:
+    """The rigid column of Tables 5–7."""
+    return [c for c in cases_t5_9(gravity=gravity) if "rigid" in c.name]
+
+
+def implied_jm(motor: Drive, cases: Sequence[Case], grid: Optional[np.ndarray] = None) -> np.ndarray:
+    """For each case, the reflected inertia J_m [kg·m²] that alone puts its cut-off on the
+    thesis's number, c_u/J_m and τ_max/J_m held at ``motor``'s (log interpolation on a grid
+    of J_m, one simulation for all; nan where the grid does not bracket it)."""
+    grid = np.geomspace(0.02, 20.0, 16) if grid is None else grid
+    cut = np.array([cutoffs(Drive(j, motor.a * j, motor.b * j, motor.omega_i, motor.omega_v), cases) for j in grid])  # (ng, nc)
+    out = np.full(len(cases), np.nan)
+    for k, c in enumerate(cases):
+        y = np.log(cut[:, k] / c.target)
+        for i in range(len(grid) - 1):
+            if np.isfinite(y[i]) and np.isfinite(y[i + 1]) and y[i] * y[i + 1] <= 0 and y[i] != y[i + 1]:
+                out[k] = float(np.exp(np.log(grid[i]) + y[i] / (y[i] - y[i + 1]) * np.log(grid[i + 1] / grid[i])))
+                break
+    return out
+
+
+@dataclass
+class DriveReport:
+    """Everything the report prints about Tables 5–9: the motoreducer fit (Tables 8–9),
+    the J_m fit (rigid column of Tables 5–7), each rigid entry's own J_m, Table 9 with
+    Ki = 100 held, and the rigid column without gravity."""
+
+    motor: Fit
+    jm: Fit
+    jm_each: np.ndarray
+    t9_fixed_ki: np.ndarray
+    rigid_nograv: np.ndarray
+
+
+BASE = Drive(j_m=1.0, c_u=0.56, tau_max=83.0, omega_i=400.0)
+"""Start of the fit: J_m = 1 (Tables 8–9 see only c_u/J_m and τ_max/J_m), a = 0.56 from
+Table 9's Kp = 10 and 100, b = 83 rad/s² from the 1 and 3 rad/s cut-offs (bang-bang first
+harmonic (4/π)·b/ω = A/√2)."""
+
+
+def run(log: bool = False) -> DriveReport:
+    """The two-stage fit (≈ 1–2 min on 2 cores)."""
+    motor = fit(motor_cases(), BASE, names=("a", "b", "omega_i"), log=log)
+    rc = rigid_cases()
+    each = implied_jm(motor.drive, rc)
+    start = Drive(float(np.nanmedian(each)), 0, 0, motor.drive.omega_i)
+    start = Drive(start.j_m, motor.drive.a * start.j_m, motor.drive.b * start.j_m, motor.drive.omega_i)
+    jm = fit(rc, start, names=("j_m",), log=log)
+    fixed = np.array([linear_cutoff(motor.drive, c) for c in motor_cases("fixed") if c.name.startswith("T9") and c.target < SIM_MIN])
+    nog = cutoffs(jm.drive, rigid_cases(gravity=False))
+    return DriveReport(motor, jm, each, fixed, nog)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.parse_args()
     t0 = time.time()
-    base = Drive(j_m=0.3, c_u=0.56 * 0.3, tau_max=83.0 * 0.3, omega_i=300.0)
-    cs = cases_t5_9()
-    print("start:", dict(zip([c.name for c in cs], np.round(cutoffs(base, cs), 1))))
-    f = fit(cs, base)
-    for n, x, (lo, hi) in zip(f.names, f.x, f.ci):
-        print(f"{n} = {x:.4g}  [{lo:.4g}, {hi:.4g}]")
-    print(f.drive)
-    for row in f.table():
-        print("%-16s thesis %7.2f ours %7.2f ratio %.3f" % row)
+    r = run(log=True)
+    for f in (r.motor, r.jm):
+        for n, x, (lo, hi) in zip(f.names, f.x, f.ci):
+            print(f"{n} = {x:.4g}  [{lo:.4g}, {hi:.4g}]")
+        for row in f.table():
+            print("%-16s thesis %7.2f ours %7.2f ratio %.3f" % row)
+    print("J_m per rigid entry:", np.round(r.jm_each, 3))
+    print("T9 Kp=1,10 with Ki=100:", np.round(r.t9_fixed_ki, 2))
+    print("rigid without gravity:", np.round(r.rigid_nograv, 1))
+    print(r.jm.drive)
     print(f"{time.time() - t0:.0f} s")
 
 

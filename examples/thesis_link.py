@@ -191,3 +191,31 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+Q_LINK = (0.0, math.pi / 2, -math.pi / 2)
+"""Motor angles of the one-link experiment in popup's arm: link 1 straight up (its bending
+locked: ``with_links("rigid", ...)``), link 2 horizontal, i.e. the thesis's q0 = 0°."""
+
+
+def engine_frf(model, payloads: Sequence[float] = (2.0, 1.0, 0.0), w: np.ndarray = W) -> np.ndarray:
+    """(θ̇3 + δ̇22)/θ̇3 of the engine's linearised arm (``popup.frequency.linearize``, input
+    the motor angle, outputs ``dq3`` and ``dd22`` — for a beam link ``dd22`` is the tip's
+    rotation rate), one row per payload [kg]; link 1 as ``model`` has it."""
+    from popup import frequency as fr
+
+    lin = fr.linearize(model, Q_LINK, input="motor_angle", outputs=["dq3", "dd22"], payload_kg=list(payloads))
+    H = lin.frf(w, joint="q3").H
+    return (H[:, :, 0] + H[:, :, 1]) / H[:, :, 0]
+
+
+def engine_rows(make) -> Dict[int, Tuple[float, float, float]]:
+    """Our (cut-off, peak, resonance) of Tables 10–15 from the engine: ``make(gravity)``
+    gives the model, with gravity for Tables 10–12 and without for 13–15 (link 1 rigid, link 2
+    as the model has it)."""
+    out: Dict[int, Tuple[float, float, float]] = {}
+    for grav, tabs in ((True, (10, 11, 12)), (False, (13, 14, 15))):
+        H = engine_frf(make(grav), [float(td.LINK_FRF[t]["payload"]) for t in tabs])
+        for i, t in enumerate(tabs):
+            out[t] = extract(W, H[i])
+    return out

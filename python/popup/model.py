@@ -21,7 +21,7 @@ from .results import BatchResult, SimResult, WrinkleAlarm
 if TYPE_CHECKING:
     from .control import ControlBatch, ControlResult, Task
 
-__all__ = ["Arm", "RigidArm", "Model", "load_arm"]
+__all__ = ["Arm", "RigidArm", "Model", "load_arm", "arm_names"]
 
 Arm = _core.Arm
 RigidArm = _core.RigidArm
@@ -52,14 +52,29 @@ def _report(errors: Sequence[Optional[Tuple[str, str]]], warns: Sequence[Sequenc
                 _warnings.warn(w, PopupWarning, stacklevel=4)
 
 
+ARMS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "arms")
+"""Packaged arm files (``<name>.toml``, each ``base = "popup-lab"`` plus its overrides),
+loadable by name: ``popup.Model("popup-lab-thesis")`` (docs/thesis.md)."""
+
+
+def arm_names() -> List[str]:
+    """Names :func:`load_arm` knows: the core's built-ins and the packaged arm files."""
+    extra = sorted(f[:-5] for f in os.listdir(ARMS_DIR) if f.endswith(".toml")) if os.path.isdir(ARMS_DIR) else []
+    return list(_core.Arm.builtin_names()) + extra
+
+
 def load_arm(arm: ArmLike) -> "_core.Arm":
-    """An :class:`Arm` from an Arm, a built-in name (``"popup-lab"``) or a path to a TOML
+    """An :class:`Arm` from an Arm, a built-in name (``"popup-lab"``), the name of a
+    packaged arm file (:func:`arm_names`, e.g. ``"popup-lab-thesis"``) or a path to a TOML
     arm file."""
     if isinstance(arm, _core.Arm):
         return arm
     s = os.fspath(arm)
     if s in _core.Arm.builtin_names():
         return _core.Arm.builtin(s)
+    packaged = os.path.join(ARMS_DIR, s + ".toml")
+    if os.sep not in s and "/" not in s and os.path.isfile(packaged):
+        return _core.Arm.load(packaged)
     if s.endswith(".toml") or os.path.exists(s):
         return _core.Arm.load(s)
     return _core.Arm.builtin(s)  # raises UnknownArmError naming the built-ins
