@@ -27,7 +27,7 @@ from .exceptions import (
     UnknownArmError,
     UnreachableError,
 )
-from .model import BEAM_PRESETS, Arm, Model, RigidArm, arm_names, load_arm
+from .model import BEAM_PRESETS, Arm, Model, RigidArm, arm_motor, arm_names, load_arm
 from .compare import Comparison
 from .io import MeasuredRun, read_run, write_run
 from . import mcaplog
@@ -56,6 +56,7 @@ __all__ = [
     "Model",
     "load_arm",
     "arm_names",
+    "arm_motor",
     "BEAM_PRESETS",
     "SimResult",
     "MeasuredRun",
