@@ -109,10 +109,11 @@ class Case:
     target: float
 
 
-def cases_t5_9(ki_rule: str = "ratio", gravity: bool = True) -> List[Case]:
+def cases_t5_9(ki_rule: str = "ratio", gravity: bool = True, tube_scale: float = 1.0) -> List[Case]:
     """The thesis's motoreducer entries: Table 8 (alone), Table 9 (alone, A = 1 rad/s,
     Ki = Kp/50 with ``ki_rule="ratio"`` — the tuning's ratio 5000/100 — or 100 with
-    ``"fixed"``), and the rigid column of Tables 5–7 (popup-lab's link 2 + payload)."""
+    ``"fixed"``), and the rigid column of Tables 5–7 (popup-lab's link 2 with its tube
+    mass × ``tube_scale``, + payload)."""
     out: List[Case] = []
     for a, w in td.TABLE8.items():
         out.append(Case(f"T8 A={a:g}", 0.0, 0.0, td.VEL_KP, td.VEL_KI, a, w))
@@ -120,7 +121,7 @@ def cases_t5_9(ki_rule: str = "ratio", gravity: bool = True) -> List[Case]:
         ki = kp / 50.0 if ki_rule == "ratio" else td.VEL_KI
         out.append(Case(f"T9 Kp={kp:g}", 0.0, 0.0, kp, ki, td.TABLE9_AMPLITUDE, w))
     for tab, m in ((5, 2.0), (6, 1.0), (7, 0.0)):
-        jl, mgx = link_inertia(m)
+        jl, mgx = link_inertia(m, tube_scale)
         for a, w in td.TABLES_5_7[m]["rigid"].items():
             out.append(Case(f"T{tab} rigid A={a:g}", jl, mgx if gravity else 0.0, td.VEL_KP, td.VEL_KI, a, w))
     return out
@@ -331,9 +332,9 @@ def motor_cases(ki_rule: str = "ratio") -> List[Case]:
     return [c for c in cases_t5_9(ki_rule) if c.name.startswith(("T8", "T9"))]
 
 
-def rigid_cases(gravity: bool = True) -> List[Case]:
-    """The rigid column of Tables 5–7."""
-    return [c for c in cases_t5_9(gravity=gravity) if "rigid" in c.name]
+def rigid_cases(gravity: bool = True, tube_scale: float = 1.0) -> List[Case]:
+    """The rigid column of Tables 5–7 (link 2's tube mass × ``tube_scale``)."""
+    return [c for c in cases_t5_9(gravity=gravity, tube_scale=tube_scale) if "rigid" in c.name]
 
 
 def implied_jm(motor: Drive, cases: Sequence[Case], grid: Optional[np.ndarray] = None) -> np.ndarray:
@@ -371,16 +372,17 @@ Table 9's Kp = 10 and 100, b ≈ 83 rad/s² from the 1 and 3 rad/s cut-offs (ban
 harmonic (4/π)·b/ω = A/√2), rounded towards an earlier run's optimum to save evaluations."""
 
 
-def run(log: bool = False) -> DriveReport:
-    """The two-stage fit (≈ 1–2 min on 2 cores)."""
+def run(log: bool = False, tube_scale: float = 1.0) -> DriveReport:
+    """The two-stage fit (≈ 2–5 min on 2 shared cores); ``tube_scale``: link 2's tube mass
+    in the rigid column's load, × popup-lab's (the link fit's, for popup-lab-thesis)."""
     motor = fit(motor_cases(), BASE, names=("a", "b", "omega_i"), log=log)
-    rc = rigid_cases()
+    rc = rigid_cases(tube_scale=tube_scale)
     each = implied_jm(motor.drive, rc)
     start = Drive(float(np.nanmedian(each)), 0, 0, motor.drive.omega_i)
     start = Drive(start.j_m, motor.drive.a * start.j_m, motor.drive.b * start.j_m, motor.drive.omega_i)
     jm = fit(rc, start, names=("j_m",), log=log)
     fixed = np.array([linear_cutoff(motor.drive, c) for c in motor_cases("fixed") if c.name.startswith("T9") and c.target < SIM_MIN])
-    nog = cutoffs(jm.drive, rigid_cases(gravity=False))
+    nog = cutoffs(jm.drive, rigid_cases(gravity=False, tube_scale=tube_scale))
     return DriveReport(motor, jm, each, fixed, nog)
 
 
