@@ -31,7 +31,7 @@ Parameters fitted (``least_squares`` on ln(ours/thesis), covariance → 95 % int
 
 Usage::
 
-    python examples/thesis_drive.py          # fit + table (≈ 1–2 min on 2 cores)
+    python examples/thesis_drive.py          # fit + table (≈ 3–6 min on 2 shared cores)
 """
 
 from __future__ import annotations
@@ -388,9 +388,10 @@ def run(log: bool = False, tube_scale: float = 1.0) -> DriveReport:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.parse_args()
+    ap.add_argument("--tube-scale", type=float, default=1.0, help="link 2's tube mass in the rigid load, x popup-lab's (docs/thesis.md uses the link fit's 0.274)")
+    args = ap.parse_args()
     t0 = time.time()
-    r = run(log=True)
+    r = run(log=True, tube_scale=args.tube_scale)
     for f in (r.motor, r.jm):
         for n, x, (lo, hi) in zip(f.names, f.x, f.ci):
             print(f"{n} = {x:.4g}  [{lo:.4g}, {hi:.4g}]")
