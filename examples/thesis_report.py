@@ -272,9 +272,9 @@ def link_section(fit: tl.LinkFit, lab: Dict, ours: Dict, rigid: Dict, beam_e: Tu
     L.append("")
     L.append(
         f"What the resonances fix: √(k/J_b) at 0 and 2 kg pins J_tube/L² = {jt:.4f} and k/L² = {kl:.0f} N·m/rad/m² "
-        "(L the payload's lever about the bending joint); the 1 kg resonance is then a check (11.0 predicted, 11.0 "
-        "printed). With reference-arm.md's lever 0.57 m the thesis's link had **k ≈ 41 N·m/rad, 0.11 × Table 3's k**, "
-        "and a tube 0.27 × as heavy; keeping Table 3's k = 360 instead needs a lever of "
+        f"(L the payload's lever about the bending joint); the 1 kg resonance is then a check (from the 0 and 2 kg ones "
+        f"alone: {math.sqrt(kl / (jt + 1.0)):.2f} rad/s, printed 11). With reference-arm.md's lever 0.57 m the thesis's link had **k ≈ {lk.k:.0f} N·m/rad, {lk.k / 360:.2f} × Table 3's k**, "
+        f"and a tube {lk.s_m:.2f} × as heavy; keeping Table 3's k = 360 instead needs a lever of "
         f"{math.sqrt(360 / kl):.2f} m (a 0.6 m link cannot have it). Table 3's f_s (15.94 Hz = √(k/J)/2π with J = "
         f"0.0359 kg·m²) is not this link either: k/J = {360 / 0.0359:.0f} s⁻² there against {kl / jt:.0f} s⁻² "
         f"(Table 12's 54.5² rad²/s²) here, a factor {360 / 0.0359 / (kl / jt):.1f}: Table 3 and Tables 10–15 were not made with one link.\n"
@@ -286,7 +286,8 @@ def link_section(fit: tl.LinkFit, lab: Dict, ours: Dict, rigid: Dict, beam_e: Tu
         f"1 kg peak). The 0 kg cut-off (147 printed, {ours[15][0]:.0f} ours) is 2.7 × its resonance; the fitted link, whose 0 kg "
         f"mode is heavily damped, gives {ours[15][0] / ours[15][2]:.2f} ×. Table 14's 7.8 and Table 15's 145 rad/s resonances repeat neighbouring numbers "
         "(sic) and are left out. Gravity: with the link horizontal it adds no stiffness about δ = 0; the fitted link "
-        "sags 0.28 rad with 2 kg, which moves the resonance by 4 % (Table 10 vs 13 above).\n"
+        f"sags {9.81 * lk.inertia(2.0)[1] / lk.k:.2f} rad with 2 kg (m·g·x/k), which moves the resonance by "
+        f"{100 * (ours[10][2] / ours[13][2] - 1):+.0f} % (Table 10 vs 13 above).\n"
     )
     e, (lo, hi) = beam_e
     L.append("**FEM column** (two peaks, 7.8 / 12.5–12.7 / 54.5–55 rad/s): link 2 an Euler–Bernoulli beam (4 elements, "
