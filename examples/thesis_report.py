@@ -455,6 +455,7 @@ def ch78_section(res: Dict[str, Any], dr: tdr.DriveReport) -> List[str]:
                 f"| {sid} | {row['sim']} | {v} | {1e3 * m['vib_x']:.2f} | {1e3 * m['vib_y']:.2f} | {1e3 * m['sag']:.1f} | "
                 f"{m['tau23']:.1f} | {m['tau_rms23']:.2f} | {m['acc_rms']:.3f} | {1e3 * m['ee_osc']:.1f} | {1e3 * m['q_err']:.0f} | {m['hold23']:.1f} | {m['status']} |"
             )
+            L[-1] = L[-1].replace("| nan ", "| — ")
     L.append("")
     claims: List[str] = []
     if "ch4" in c7.get("ch4", {}):
