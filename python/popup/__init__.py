@@ -27,7 +27,7 @@ from .exceptions import (
     UnknownArmError,
     UnreachableError,
 )
-from .model import BEAM_PRESETS, Arm, Model, RigidArm, load_arm
+from .model import BEAM_PRESETS, Arm, Model, RigidArm, arm_motor, arm_names, load_arm
 from .compare import Comparison
 from .io import MeasuredRun, read_run, write_run
 from . import mcaplog
@@ -55,6 +55,8 @@ __all__ = [
     "RigidArm",
     "Model",
     "load_arm",
+    "arm_names",
+    "arm_motor",
     "BEAM_PRESETS",
     "SimResult",
     "MeasuredRun",

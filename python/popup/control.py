@@ -157,7 +157,10 @@ class Controller:
     three) and ``cart_k``; unset gains take the thesis defaults. ``motor``: motoreducer fields
     for all three joints (``gear_ratio``, ``torque_per_unit`` [N·m per drive unit],
     ``tau_max`` [N·m], ``current_bandwidth`` [rad/s], ``encoder_counts``); ``motors``: three
-    such mappings. ``damping``: damping PIDs on (bool or three).
+    such mappings. ``damping``: damping PIDs on (bool or three). ``cartesian_arm``: the
+    kinematics of the Cartesian law and its workspace check: ``"prbm"`` (the chain's own,
+    default), ``"as_built"`` (the arm file's rigid thesis Table 1, as the thesis's chapter 8
+    did with its PRBM plant) or ``"ik"`` (Table 2).
     """
 
     rate_hz: float = 10_000.0
@@ -168,6 +171,7 @@ class Controller:
     damping_lpf_rad_s: float = 13.5
     v_max: float = math.inf
     anti_windup: bool = True
+    cartesian_arm: str = "prbm"
 
     def to_dict(self) -> Dict[str, Any]:
         d: Dict[str, Any] = {
@@ -176,6 +180,7 @@ class Controller:
             "damping_lpf_rad_s": float(self.damping_lpf_rad_s),
             "v_max": float(self.v_max),
             "anti_windup": bool(self.anti_windup),
+            "cartesian_arm": str(self.cartesian_arm),
             "gains": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.gains.items()},
         }
         if self.motor is not None:

@@ -321,8 +321,10 @@ pub struct Model {
     pub payload_com: Vec3,
     /// Link radii [m].
     pub link_radius: [f64; 2],
-    /// Stiffness scale per link.
+    /// Stiffness scale per link (k and c).
     pub link_scale: [f64; 2],
+    /// Extra damping factor per link (c only) [1].
+    pub link_damping: [f64; 2],
     /// Wrinkling coefficient (M_w = coef · p · r³).
     pub wrinkle_coef: f64,
     /// IMU mounts: (body 0-based, position in body frame).
@@ -523,6 +525,7 @@ impl Model {
         }
         let mut link_radius = [0.0; 2];
         let mut link_scale = [0.0; 2];
+        let mut link_damping = [1.0; 2];
         let rref = positive("stiffness.reference_radius_m", spec.stiffness.reference_radius_m)?;
         for (l, ls) in spec.links.iter().enumerate() {
             link_radius[l] = positive(&format!("links[{l}].radius_m"), ls.radius_m)?;
@@ -532,6 +535,9 @@ impl Model {
                 Some(s) => positive(&format!("links[{l}].stiffness_scale"), s)?,
                 None => (ls.radius_m / rref).powi(3),
             };
+            if let Some(s) = ls.damping_scale {
+                link_damping[l] = nonneg(&format!("links[{l}].damping_scale"), s)?;
+            }
         }
         let t = &spec.stiffness;
         if t.pressure_pa.is_empty() || t.pressure_pa.len() != t.k_nm_per_rad.len() || t.pressure_pa.len() != t.c_nms_per_rad.len() {
@@ -862,6 +868,7 @@ impl Model {
             payload_com,
             link_radius,
             link_scale,
+            link_damping,
             wrinkle_coef,
             imu: [(spec_body[imu[0].0], imu[0].1), (spec_body[imu[1].0], imu[1].1)],
             ee: (spec_body[ee.0], ee.1),

@@ -120,7 +120,7 @@ impl ParamData {
             }
             kc0[l] = [k, c];
             kl[l] = k * model.link_scale[l];
-            cl[l] = c * model.link_scale[l];
+            cl[l] = c * model.link_scale[l] * model.link_damping[l];
             mw[l] = model.wrinkle_coef * p * model.link_radius[l].powi(3);
             if fx.wrinkling.mw_scale != 1.0 {
                 mw[l] *= fx.wrinkling.mw_scale;

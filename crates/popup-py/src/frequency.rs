@@ -130,7 +130,7 @@ pub fn linearize<'py>(
 /// The controller of a control file as numbers: `rate_hz`, `gains` (flat, `gain_names()`
 /// order), `motors` (three dicts: `gear_ratio`, `torque_per_unit`, `tau_max`,
 /// `current_bandwidth`, `encoder_counts`), `damping` (three bools), `damping_lpf_rad_s`,
-/// `v_max`, `anti_windup`. Raises the parser's error otherwise.
+/// `v_max`, `anti_windup`, `cartesian_arm`. Raises the parser's error otherwise.
 #[pyfunction]
 #[pyo3(signature = (model, text, source = "<control>"))]
 pub fn controller_params<'py>(py: Python<'py>, model: &PyModel, text: &str, source: &str) -> PyResult<Bound<'py, PyDict>> {
@@ -154,5 +154,13 @@ pub fn controller_params<'py>(py: Python<'py>, model: &PyModel, text: &str, sour
     out.set_item("damping_lpf_rad_s", c.damping_lpf)?;
     out.set_item("v_max", c.v_max)?;
     out.set_item("anti_windup", c.anti_windup)?;
+    out.set_item(
+        "cartesian_arm",
+        match c.cartesian_arm {
+            popup_core::control::CartesianArm::Prbm => "prbm",
+            popup_core::control::CartesianArm::AsBuilt => "as_built",
+            popup_core::control::CartesianArm::Ik => "ik",
+        },
+    )?;
     Ok(out)
 }

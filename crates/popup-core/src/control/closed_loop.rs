@@ -6,7 +6,7 @@
 use crate::control::collision::{Capsule, CollisionWorld};
 use crate::control::law::{Lpf, Pi, Pid, PidState};
 use crate::control::machine::{Command, Event, FaultAction, Phase};
-use crate::control::ClosedLoop;
+use crate::control::{CartesianArm, ClosedLoop};
 use crate::drive::Drive;
 use crate::dynamics::forward_pass;
 use crate::error::{Error, Result};
@@ -212,7 +212,11 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
     if pd_gap(params) {
         return Err(Error::param("effects.backlash.gap", format!("{:?}", params.effects.backlash.gap), "backlash needs encoder replay in this version"));
     }
-    let rigid = rigid_equivalent(model)?;
+    let rigid = match c.cartesian_arm {
+        CartesianArm::Prbm => rigid_equivalent(model)?,
+        CartesianArm::AsBuilt => model.spec.rigid_arm("as_built")?,
+        CartesianArm::Ik => model.spec.rigid_arm("ik")?,
+    };
     for (i, ph) in cfg.sequence.phases.iter().enumerate() {
         if let Command::Cartesian { target } = ph.command {
             rigid.in_workspace(&Vec3::from(target)).map_err(|e| match e {
@@ -479,7 +483,13 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
             let vstar: [f64; 3] = match (cart, vel_cmd) {
                 (_, Some(vc)) => vc,
                 (Some(p_t), None) => {
-                    let (p, jc) = rigid_tip(model, &qe);
+                    let (p, jc) = match c.cartesian_arm {
+                        CartesianArm::Prbm => rigid_tip(model, &qe),
+                        _ => {
+                            let jr = rigid.jacobian(&qe);
+                            (rigid.fk(&qe), std::array::from_fn(|k| Vec3::new(jr[(0, k)], jr[(1, k)], jr[(2, k)])))
+                        }
+                    };
                     let e = p_t - p;
                     std::array::from_fn(|j| (g.cart_k * jc[j].dot(&e)).clamp(-c.v_max, c.v_max))
                 }

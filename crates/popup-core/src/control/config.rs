@@ -493,10 +493,10 @@ impl MotorToml {
 }
 
 /// Keys of `[controller]` that are plain values.
-const CONTROLLER_VALUE_KEYS: [&str; 5] = ["rate_hz", "damping", "damping_lpf_rad_s", "v_max", "anti_windup"];
+const CONTROLLER_VALUE_KEYS: [&str; 6] = ["rate_hz", "damping", "damping_lpf_rad_s", "v_max", "anti_windup", "cartesian_arm"];
 
 /// Keys of `[controller]`.
-pub const CONTROLLER_KEYS: [&str; 8] = ["rate_hz", "damping", "damping_lpf_rad_s", "v_max", "anti_windup", "gains", "motor", "motors"];
+pub const CONTROLLER_KEYS: [&str; 9] = ["rate_hz", "damping", "damping_lpf_rad_s", "v_max", "anti_windup", "cartesian_arm", "gains", "motor", "motors"];
 
 #[derive(Debug, Default, Clone, Copy, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -506,6 +506,7 @@ struct ControllerToml {
     damping_lpf_rad_s: Option<f64>,
     v_max: Option<f64>,
     anti_windup: Option<bool>,
+    cartesian_arm: Option<crate::control::CartesianArm>,
 }
 
 impl ControllerToml {
@@ -515,6 +516,7 @@ impl ControllerToml {
         c.damping_lpf = self.damping_lpf_rad_s.unwrap_or(c.damping_lpf);
         c.v_max = self.v_max.unwrap_or(c.v_max);
         c.anti_windup = self.anti_windup.unwrap_or(c.anti_windup);
+        c.cartesian_arm = self.cartesian_arm.unwrap_or(c.cartesian_arm);
     }
 }
 

@@ -115,6 +115,22 @@ impl Gains {
     }
 }
 
+/// Which rigid 3-DOF kinematics the Cartesian law (`q̇* = K_c J_vᵀ (p* − p)`) and its
+/// workspace check use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CartesianArm {
+    /// The model's own chain with every bending joint at zero (default: controller and
+    /// plant agree on the geometry).
+    #[default]
+    Prbm,
+    /// The arm file's as-built rigid table (thesis Table 1), as the thesis's chapter 8 did
+    /// with its PRBM plant.
+    AsBuilt,
+    /// The arm file's offset-free rigid table (thesis Table 2).
+    Ik,
+}
+
 /// The controller: rate, motoreducers, gains and switches (immutable during a run).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ControllerSpec {
@@ -132,6 +148,8 @@ pub struct ControllerSpec {
     pub v_max: f64,
     /// Conditional-integration anti-windup on (default true; off only to show what it does).
     pub anti_windup: bool,
+    /// Kinematics of the Cartesian law (default: the chain's own).
+    pub cartesian_arm: CartesianArm,
 }
 
 impl Default for ControllerSpec {
@@ -144,6 +162,7 @@ impl Default for ControllerSpec {
             damping_lpf: 13.5,
             v_max: f64::INFINITY,
             anti_windup: true,
+            cartesian_arm: CartesianArm::Prbm,
         }
     }
 }

@@ -104,6 +104,11 @@ pub struct LinkSpec {
     /// (r / reference_radius_m)³: bending stiffness of an inflated tube grows with r³.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stiffness_scale: Option<f64>,
+    /// Extra factor on this link's damping c(p) only, on top of the stiffness scale [1];
+    /// absent = 1. It lets a fitted link keep its own damping ratio when its stiffness is
+    /// rescaled (e.g. `popup-lab-thesis`, docs/thesis.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub damping_scale: Option<f64>,
     /// Default inflation pressure (relative) [Pa].
     pub pressure_pa: f64,
 }
@@ -303,8 +308,8 @@ impl ArmSpec {
                 body("link 2 outer", 2, vec![tube("link 2 outer piece", 0.38, 0.57)]),
             ],
             links: vec![
-                LinkSpec { radius_m: 0.085, length_m: 0.6, stiffness_scale: None, pressure_pa: 30e3 },
-                LinkSpec { radius_m: 0.055, length_m: 0.6, stiffness_scale: None, pressure_pa: 30e3 },
+                LinkSpec { radius_m: 0.085, length_m: 0.6, stiffness_scale: None, damping_scale: None, pressure_pa: 30e3 },
+                LinkSpec { radius_m: 0.055, length_m: 0.6, stiffness_scale: None, damping_scale: None, pressure_pa: 30e3 },
             ],
             stiffness: StiffnessTable {
                 reference_radius_m: 0.055,
