@@ -89,9 +89,10 @@ enum Cmd {
         /// Also write one MCAP log per run (DIR/run_NNNN.mcap).
         #[arg(long)]
         mcap: bool,
-        /// Worker threads (0 = all cores).
-        #[arg(long, default_value_t = 0)]
-        threads: usize,
+        /// Worker threads (0 = all cores; more than the cores are capped at them, more than
+        /// 4 per core refused).
+        #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+        threads: i64,
         /// Simulated time per run [s] (default: the scenario's).
         #[arg(long)]
         duration: Option<f64>,
@@ -278,6 +279,7 @@ fn go(cli: Cli) -> popup_core::Result<i32> {
             ))
         }
         Cmd::Sweep { scenario, params, out, mcap, threads, duration, seed, parquet: false } => {
+            let threads = popup_core::limits::threads("--threads", threads)?;
             let axes = params.iter().map(|p| sweep::parse_axis(p)).collect::<popup_core::Result<Vec<_>>>()?;
             if let Some(d) = duration {
                 execute::check_duration("--duration", d)?;
