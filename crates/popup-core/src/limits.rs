@@ -175,6 +175,14 @@ pub const CHANNEL_LIMITS: &[ChannelLimit] = &[
     },
 ];
 
+/// A time step of a measured run longer than this many median steps is a warning (samples
+/// were lost; the replay interpolates across the gap).
+pub const GAP_WARN_STEPS: f64 = 10.0;
+
+/// A time step of a measured run longer than this many median steps is an error (a
+/// logging glitch: no replay across it means anything).
+pub const GAP_ERROR_STEPS: f64 = 1e4;
+
 /// The limit of a measured-run column, if it has one.
 pub fn channel_limit(column: &str) -> Option<&'static ChannelLimit> {
     CHANNEL_LIMITS.iter().find(|l| l.columns.contains(&column))
