@@ -222,6 +222,9 @@ fn run_scenario(path: &Path, out: &Path, duration: Option<f64>, seed: Option<u64
     if let Some(s) = seed {
         sc.seed = s;
     }
+    for w in sc.nonfinite_warnings() {
+        eprintln!("popup: warning: {}: {w}", path.display());
+    }
     let (stop, armed) = StopFlags::register();
     let mut prog = Progress::new(mode, sc.closed.duration, sc.log.flush_every_s, stop.clone());
     let mut extra = std::collections::BTreeMap::new();
@@ -245,7 +248,7 @@ fn run_scenario(path: &Path, out: &Path, duration: Option<f64>, seed: Option<u64
         m.peak_ratio[1],
         m.wrinkle_alarms,
         if m.wrinkle_alarms == 1 { "" } else { "s" },
-        if o.nonfinite > 0 { format!("; {} non-finite samples dropped", o.nonfinite) } else { String::new() }
+        if o.nonfinite > 0 { format!("; {} non-finite values left out of the log (their samples kept)", o.nonfinite) } else { String::new() }
     );
     Ok(match o.status {
         popup_core::control::closed_loop::Status::Completed => 0,
@@ -259,6 +262,9 @@ fn go(cli: Cli) -> popup_core::Result<i32> {
         Cmd::Run { scenario, out, duration, seed, progress } => return run_scenario(&scenario, &out, duration, seed, progress),
         Cmd::Check { scenario } => {
             let Some(sc) = read_scenario(&scenario) else { return Ok(2) };
+            for w in sc.nonfinite_warnings() {
+                eprintln!("popup: warning: {}: {w}", scenario.display());
+            }
             println!(
                 "{}: ok: arm {}, payload {} kg, pressures {:?} Pa, {} phase{}, {} s at dt = {} s, sensors at {} Hz",
                 scenario.display(),
