@@ -172,7 +172,8 @@ impl PyModel {
 
     /// Joint coordinates (nv,) (7 for the arm file's chain) at rest: motors at `q_motor`, bending joints in static
     /// equilibrium.
-    fn rest_state<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q_motor: [f64; 3]) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    fn rest_state<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q_motor: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let q_motor = crate::arm::three("q_motor", &q_motor, "motor angles q1, q2, q3 [rad]")?;
         let pd = self.pd(payload_kg, pressure_pa)?;
         let st = rest_state(&self.m, &pd, 0.0, q_motor).py()?;
         Ok(PyArray1::from_slice(py, &st.q.as_slice()[..self.m.nv]))
