@@ -400,9 +400,11 @@ def _read_mcap(p: Path) -> MeasuredRun:
 
     log = read_log(p)
     where_exp = f"{p} (metadata record experiment)"
+    # a file cut short says so (and where) in every error about what it lacks
+    cut = "" if log.complete else f"the file was cut short ({log.lost}), and it has "
     if "experiment" not in log.metadata:
         raise LogFileError(
-            f"{p}: no experiment metadata record; a measured-run MCAP needs one (key toml with a complete "
+            f"{p}: {cut}no experiment metadata record; a measured-run MCAP needs one (key toml with a complete "
             f"{_TOML}, or one key per experiment key: {', '.join(_REQUIRED_KEYS)}, ...; docs/logging.md)"
         )
     warns: List[str] = [] if log.complete else [f"{p}: the file was cut short: {log.lost}"]
@@ -410,7 +412,7 @@ def _read_mcap(p: Path) -> MeasuredRun:
     cols = [c for c in log.columns if c in MEASURED_COLUMNS and c != "t"]
     if not cols:
         raise LogFileError(
-            f"{p}: no measured-run samples: none of the topics {', '.join(log.topics) or '(none)'} has a "
+            f"{p}: {cut}no measured-run samples: none of the topics {', '.join(log.topics) or '(none)'} has a "
             f"measured-run column ({', '.join(MEASURED_COLUMNS[1:])})"
         )
     df = _check_data(log._frame(cols), str(p), None, warns)
