@@ -261,7 +261,7 @@ impl<W: Write + Seek> Sink for McapLogger<'_, W> {
             let names = tp.names();
             // a non-finite value is left out of its message (its key absent: a missing
             // sample), never its finite siblings; d_min = +inf means "no obstacle", not an error
-            let is_bad = |v: f64, n: &str| !v.is_finite() && !(n == "d_min" && v == f64::INFINITY);
+            let is_bad = |v: f64, n: &str| !(v.is_finite() || (n == "d_min" && v == f64::INFINITY));
             let nbad = vals.iter().zip(names).filter(|(v, n)| is_bad(**v, n)).count();
             if !t.is_finite() {
                 // no time, no sample: the whole group is dropped
