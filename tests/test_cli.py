@@ -226,3 +226,15 @@ def test_ctrl_c_stops_a_rust_run():
     if p.returncode == 1 and "KeyboardInterrupt" in err:
         pytest.skip("SIGINT arrived before the Rust run started (slow start-up)")
     assert p.returncode == -signal.SIGINT, err
+
+
+def test_sweep_parquet_without_pyarrow_is_a_clear_error(tmp_path, monkeypatch, capsys):
+    # issue 19: not a traceback; refused before any run
+    real = cli._module_exists
+    monkeypatch.setattr(cli, "_module_exists", lambda m: False if m == "pyarrow" else real(m))
+    ran = []
+    monkeypatch.setattr(cli, "run_rust", lambda args: ran.append(args) or 0)
+    code = cli.main(["sweep", "sc.toml", "--param", "payload_kg=1", "--out", str(tmp_path), "--parquet"])
+    err = capsys.readouterr().err
+    assert code == 2 and ran == []
+    assert "--parquet needs pyarrow" in err and "pip install pyarrow" in err and "Traceback" not in err, err

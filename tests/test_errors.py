@@ -96,3 +96,29 @@ def test_failed_run_in_batch_does_not_lose_others(model):
 def test_unknown_disable_flag():
     with pytest.raises(popup.ParameterError, match="disable"):
         popup.Model(disable=["friction"])
+
+
+# issue 19: every error a PopupError with the matching built-in, naming the argument
+@pytest.mark.parametrize(
+    "call, needle",
+    [
+        (lambda m: popup.Model(pressure_pa=(30e3,)), "input pressure_pa"),
+        (lambda m: popup.Model(pressure_pa=[[1.0, 2.0]]), "input pressure_pa"),
+        (lambda m: popup.Model(payload_kg="x"), "input payload_kg"),
+        (lambda m: m.rollout(payload_kg=np.zeros(0), torque=[0.0, 0.0, 0.0], duration=0.01), "input payload_kg"),
+        (lambda m: m.rollout(torque=[0.0, 0.0, 0.0], duration=0.01, threads=-1), "input threads"),
+        (lambda m: m.rollout(torque=[0.0, 0.0, 0.0], duration=0.01, threads="2"), "input threads"),
+        (lambda m: m.rigid().ik([1, 2]), "input p"),
+        (lambda m: m.rigid().fk([1, 2]), "input q"),
+        (lambda m: m.rest_state((0, 0.6)), "input q_motor"),
+        (lambda m: m.holding_torque((0, 0.6)), "input q_motor"),
+        (lambda m: m.simulate(duration=float("nan")), "input duration: nan s"),
+        (lambda m: m.simulate(duration=0.1, sample_rate="fast"), "input sample_rate"),
+        (lambda m: m.replay([0.0, 0.1], [["a", 0, 0], [0, 0, 0]]), "input encoder_q"),
+    ],
+)
+def test_bad_arguments_are_popup_errors_naming_the_argument(model, call, needle):
+    with pytest.raises(popup.PopupError) as e:
+        call(model)
+    assert isinstance(e.value, ValueError), type(e.value)
+    assert needle in str(e.value), str(e.value)

@@ -82,10 +82,11 @@ def test_roundtrip_nothing_changed(tmp_path: Path) -> None:
         "t": t,
         "q1": rng.standard_normal(n),
         "q2": rng.standard_normal(n) * 1e-9,
-        "q3": rng.standard_normal(n) * 1e6,
+        "q3": rng.uniform(-3.0, 3.0, n),  # plausible angles (issue 19: the reader refuses 1e6 rad)
         "tau2": rng.standard_normal(n),
         "imu2_az": rng.standard_normal(n),
         "p1": np.full(n, 30000.0),
+        "p2": 3e4 + rng.standard_normal(n) * 1e3,  # large magnitudes round-trip bit-exactly too
     }
     data["tau2"][[3, 4, 10]] = np.nan  # missing samples
     exp = experiment(

@@ -332,3 +332,27 @@ def test_second_run_in_one_python_process_still_finishes_on_ctrl_c(tmp_path: Pat
     assert popup.read_log(first).run_end["status"] == "completed"
     log = popup.read_log(second)
     assert log.complete and log.run_end["status"] == "interrupted"
+
+
+def test_zero_pressure_keeps_the_finite_bending_channels(tmp_path: Path) -> None:
+    # issue 19: only m*_ratio (|M|/M_w with M_w = 0) is infinite; the bending angles and
+    # moments of the same samples must survive, the count is reported, check warns first
+    sc = hold_file(tmp_path, 0.3)
+    sc.write_text(sc.read_text().replace("payload_kg = 1.0", "payload_kg = 1.0\npressure_pa = [0.0, 0.0]"))
+    chk = subprocess.run(popup_cmd("check", str(sc)), capture_output=True, text=True, timeout=120)
+    assert chk.returncode == 0, chk.stderr
+    assert "warning" in chk.stderr and "pressure_pa[0] (link 1) = 0 Pa" in chk.stderr and "m1_ratio" in chk.stderr, chk.stderr
+    out = tmp_path / "p0.mcap"
+    r = subprocess.run(popup_cmd("run", str(sc), "--out", str(out), "--progress", "none"), capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "non-finite values left out of the log (their samples kept)" in r.stderr, r.stderr
+    log = popup.read_log(out)
+    bending = log.messages("/popup/bending")
+    assert len(bending) == int(log.run_end["samples"]) > 0, "no sample of /popup/bending is dropped"
+    keys = set(bending[0])
+    assert "m1_ratio" not in keys and "m2_ratio" not in keys
+    assert {"d11", "d12", "d21", "d22", "m11", "m12", "m21", "m22", "energy"} <= keys, keys
+    assert int(log.run_end["nonfinite_dropped"]) == 2 * len(bending)
+    assert np.isfinite(log.table["d11"].to_numpy()).all()
+    assert "m1_ratio" not in log.table.columns or np.isnan(log.table["m1_ratio"].to_numpy()).all()
+    mcap_check.validate_file(out)

@@ -65,6 +65,14 @@ def _sweep_parquet(rest: List[str]) -> int:
     """``popup sweep ... --parquet``: the Rust sweep writes ``summary.csv``; the summary is
     also written as ``summary.parquet`` (pyarrow), with the same columns and values."""
     args = [a for a in rest if a != "--parquet"]
+    if not any(a in _HELP for a in args) and not _module_exists("pyarrow"):
+        # checked before the sweep runs: no work is done for a summary that cannot be written
+        print(
+            f"{PROG}: error: --parquet needs pyarrow, which is not installed; install it (pip install pyarrow) "
+            "or leave out --parquet (summary.csv is always written)",
+            file=sys.stderr,
+        )
+        return 2
     code = run_rust(["sweep", *args])
     out = next((a.split("=", 1)[1] for a in args if a.startswith("--out=")), None)
     if out is None and "--out" in args and args.index("--out") + 1 < len(args):

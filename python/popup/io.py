@@ -285,6 +285,15 @@ class MeasuredRun:
         [rad] (M, 3))``, with the same rules as :meth:`encoder`."""
         return self._angles(_REFERENCE_COLS, "the reference replay")
 
+    def check(self) -> None:
+        """Check :attr:`data` again as :func:`read_run` did (time strictly increasing,
+        plausible values per :data:`LIMITS`, gaps): raises
+        :class:`~popup.MeasuredRunError` naming the row and column (data changed after
+        reading is checked too). Diagnosis calls it first, so a data glitch is never
+        blamed on missing physics."""
+        lines = self._lines if self._lines is not None and len(self._lines) == len(self.data) else None
+        _check_data(self.data, self._where(), lines, [])
+
     # -------------------------------------------------------------- helpers
     def _where(self) -> str:
         return str(self.data_file if self.data_file is not None else self.source)
@@ -391,9 +400,11 @@ def _read_mcap(p: Path) -> MeasuredRun:
 
     log = read_log(p)
     where_exp = f"{p} (metadata record experiment)"
+    # a file cut short says so (and where) in every error about what it lacks
+    cut = "" if log.complete else f"the file was cut short ({log.lost}), and it has "
     if "experiment" not in log.metadata:
         raise LogFileError(
-            f"{p}: no experiment metadata record; a measured-run MCAP needs one (key toml with a complete "
+            f"{p}: {cut}no experiment metadata record; a measured-run MCAP needs one (key toml with a complete "
             f"{_TOML}, or one key per experiment key: {', '.join(_REQUIRED_KEYS)}, ...; docs/logging.md)"
         )
     warns: List[str] = [] if log.complete else [f"{p}: the file was cut short: {log.lost}"]
@@ -401,7 +412,7 @@ def _read_mcap(p: Path) -> MeasuredRun:
     cols = [c for c in log.columns if c in MEASURED_COLUMNS and c != "t"]
     if not cols:
         raise LogFileError(
-            f"{p}: no measured-run samples: none of the topics {', '.join(log.topics) or '(none)'} has a "
+            f"{p}: {cut}no measured-run samples: none of the topics {', '.join(log.topics) or '(none)'} has a "
             f"measured-run column ({', '.join(MEASURED_COLUMNS[1:])})"
         )
     df = _check_data(log._frame(cols), str(p), None, warns)
@@ -725,6 +736,8 @@ def _check_data(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], war
             f"not after {_row(i - 1, lines)} (t = {_num(t[i - 1])} s)"
         )
 
+    _check_plausible(out, where, lines, warns)
+
     unknown = [c for c in names if c not in MEASURED_COLUMNS]
     if unknown:
         hints = [f"{c!r} (did you mean {c.strip()!r}?)" if c.strip() in MEASURED_COLUMNS else repr(c) for c in unknown]
@@ -733,6 +746,69 @@ def _check_data(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], war
             f"used (measured-run columns: {', '.join(MEASURED_COLUMNS)})"
         )
     return out
+
+
+LIMITS: Dict[str, Tuple[str, float, float, float, str]] = {
+    c: (unit, lo, warn, err, advice) for cols, unit, lo, warn, err, advice in _core.CHANNEL_LIMITS for c in cols
+}
+"""Plausibility limits of the measured-run columns: ``column -> (unit, min, warn_abs,
+error_abs, advice)``. The one registry is the engine's (``popup_core::limits``, exposed as
+``popup._core.CHANNEL_LIMITS``); :func:`read_run` refuses values beyond ``error_abs`` (or
+below ``min``) and warns about values beyond ``warn_abs``."""
+
+
+def _check_plausible(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], warns: List[str]) -> None:
+    """Refuse values no arm produces, warn about values that look wrong (time gaps far
+    beyond the median step, angles that look like degrees, ...), each naming the row and
+    column and saying what to do. Limits: :data:`LIMITS` and ``_core.GAP_*_STEPS``."""
+    for c in df.columns:
+        lim = LIMITS.get(str(c))
+        if lim is None:
+            continue
+        unit, lo, warn, err, advice = lim
+        x = df[c].to_numpy(dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(np.isinf(x) | (np.abs(x) > err) | (x < lo))
+        if bad.size:
+            i = int(bad[0])
+            more = f" (and {bad.size - 1} more row{'s' if bad.size > 2 else ''})" if bad.size > 1 else ""
+            if np.isinf(x[i]):
+                raise MeasuredRunError(
+                    f"{where}: {_row(i, lines)}, column {c}: {_num(x[i])} is not finite{more}; a measured value is a finite "
+                    f"number in {unit}, or an empty cell / nan for a missing sample"
+                )
+            raise MeasuredRunError(
+                f"{where}: {_row(i, lines)}, column {c}: {_num(x[i])} {unit} is not plausible{more}; the limit is "
+                f"{err:.4g} {unit} in magnitude{'' if lo == -math.inf else f' and at least {lo:.4g} {unit}'}: {advice}"
+            )
+        with np.errstate(invalid="ignore"):
+            odd = np.flatnonzero(np.abs(x) > warn)
+        if odd.size:
+            i = int(odd[0])
+            warns.append(
+                f"{where}: column {c}: {odd.size} value{'s' if odd.size > 1 else ''} beyond {warn:.4g} {unit} in "
+                f"magnitude (first: {_row(i, lines)}, {_num(x[i])} {unit}): {advice}"
+            )
+    t = df["t"].to_numpy(dtype=np.float64)
+    if t.size >= 3:
+        d = np.diff(t)
+        med = float(np.median(d))
+        worst = int(np.argmax(d))
+        if med > 0 and d[worst] > _core.GAP_ERROR_STEPS * med:
+            raise MeasuredRunError(
+                f"{where}: {_row(worst + 1, lines)}, column t: {_num(t[worst + 1])} s comes {_num(float(d[worst]))} s after "
+                f"{_row(worst, lines)} (t = {_num(t[worst])} s), {d[worst] / med:.3g} times the median step "
+                f"{_num(med)} s (the limit is {_core.GAP_ERROR_STEPS:g} times): a time stamp glitch or a gap no replay can "
+                f"bridge; fix the time stamp, or split the run at the gap"
+            )
+        gaps = np.flatnonzero(d > _core.GAP_WARN_STEPS * med) if med > 0 else np.zeros(0, dtype=int)
+        if gaps.size:
+            i = int(gaps[0])
+            warns.append(
+                f"{where}: column t: {gaps.size} gap{'s' if gaps.size > 1 else ''} longer than {_core.GAP_WARN_STEPS:g} median "
+                f"steps ({_num(med)} s), the first before {_ranges(gaps + 1, lines, limit=3).split(',')[0]} "
+                f"({_num(float(d[i]))} s); samples were lost there and the replay interpolates across the gap"
+            )
 
 
 def _ranges(idx: np.ndarray, lines: Optional[np.ndarray], limit: int = 5) -> str:

@@ -316,7 +316,14 @@ def _walk(path: Path, f: IO[bytes], size: int) -> _Layout:
             raise LogFileError(f"{path}: byte {pos}: 0x{op:02x} is not an MCAP record opcode; the file is corrupted there")
         end = pos + 9 + length
         if end > size:
-            lay.tail = f"file ends inside a {_kind(op)} record at byte {pos} ({size - pos} of {end - pos} bytes present)"
+            if length >= 1 << 62:
+                # a killed writer leaves the placeholder length of the record it had open
+                lay.tail = (
+                    f"file ends inside a {_kind(op)} record at byte {pos} whose length was never written (the writer "
+                    f"stopped while the record was open; {size - pos} bytes of it present)"
+                )
+            else:
+                lay.tail = f"file ends inside a {_kind(op)} record at byte {pos} ({size - pos} of {end - pos} bytes present)"
             return lay
         lay.starts.append(pos)
         lay.ends.append(end)

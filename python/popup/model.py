@@ -102,14 +102,58 @@ def load_arm(arm: ArmLike) -> "_core.Arm":
     return _core.Arm.builtin(s)  # raises UnknownArmError naming the built-ins
 
 
-def _as_float_array(name: str, x: Any, ndim: int) -> np.ndarray:
+def _as_float_array(name: str, x: Any, ndim: Optional[int]) -> np.ndarray:
     try:
         a = np.array(x, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise InputError(f"input {name}: cannot convert to a float array ({e})") from None
-    if a.ndim != ndim:
+    if ndim is not None and a.ndim != ndim:
         raise InputError(f"input {name}: expected {ndim} dimensions, got shape {a.shape}")
     return a
+
+
+def _scalar(name: str, x: Any, unit: str) -> float:
+    """One number of argument ``name``, or an InputError naming it."""
+    try:
+        if np.ndim(x) != 0:
+            raise TypeError(f"shape {np.shape(x)}")
+        return float(x)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"input {name}: expected one number [{unit}], got {x!r} ({e})") from None
+
+
+def _pair(name: str, x: Any) -> Tuple[float, float]:
+    """Link 1 and link 2 values of ``name`` (one number is used for both), or an
+    InputError naming the argument."""
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"input {name}: expected (link 1, link 2) [Pa] or one number for both, got {x!r} ({e})") from None
+    if a.ndim == 0:
+        return (float(a), float(a))
+    if a.shape != (2,):
+        raise InputError(f"input {name}: expected (link 1, link 2) [Pa] or one number for both, got shape {a.shape}")
+    return (float(a[0]), float(a[1]))
+
+
+def _duration(x: Any) -> float:
+    d = _scalar("duration", x, "s")
+    if not (math.isfinite(d) and d >= 0):
+        raise InputError(f"input duration: {d!r} s must be finite and >= 0")
+    return d
+
+
+def _threads(x: Any) -> int:
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, np.integer)):
+        raise InputError(f"input threads: expected an integer (0 = all cores), got {x!r}")
+    return int(x)
+
+
+def _rate(x: Any) -> float:
+    r = _scalar("sample_rate", x, "Hz")
+    if not (math.isfinite(r) and r > 0):
+        raise InputError(f"input sample_rate: {r!r} Hz must be finite and > 0")
+    return r
 
 
 def _tile(name: str, a: np.ndarray, nb: int, inner_ndim: int) -> np.ndarray:
@@ -175,11 +219,8 @@ class Model:
             _core_model = _core.Model(load_arm(arm), dt=dt, integrator=integrator, disable=dis)
         self._m = _core_model
         spec_defaults = self._defaults()
-        self.payload_kg = float(spec_defaults[0] if payload_kg is None else payload_kg)
-        pp = spec_defaults[1] if pressure_pa is None else pressure_pa
-        if np.ndim(pp) == 0:
-            pp = (float(pp), float(pp))  # type: ignore[arg-type]
-        self.pressure_pa: Tuple[float, float] = (float(pp[0]), float(pp[1]))
+        self.payload_kg = _scalar("payload_kg", spec_defaults[0] if payload_kg is None else payload_kg, "kg")
+        self.pressure_pa: Tuple[float, float] = _pair("pressure_pa", spec_defaults[1] if pressure_pa is None else pressure_pa)
         # validate now, so a bad payload/pressure fails at construction
         info = self._m.param_data(self.payload_kg, self.pressure_pa)
         for w in info["warnings"]:
@@ -541,25 +582,27 @@ class Model:
         replay = encoder_q is not None or encoder_t is not None
         if replay and torque is not None:
             raise InputError("input: give either torque (torque-driven) or encoder_t/encoder_q (replay), not both")
-        pay = np.array(self.payload_kg if payload_kg is None else payload_kg, dtype=np.float64)
-        if pay.ndim > 1:
-            raise InputError(f"input payload_kg: expected a scalar or shape (B,), got shape {pay.shape}")
+        pay = _as_float_array("payload_kg", self.payload_kg if payload_kg is None else payload_kg, None)
+        if pay.ndim > 1 or pay.size == 0:
+            raise InputError(f"input payload_kg: expected a scalar or shape (B,) with B >= 1, got shape {pay.shape}")
         pay = pay.reshape(-1)
-        pres = np.array(self.pressure_pa if pressure_pa is None else pressure_pa, dtype=np.float64)
+        sample_rate = _rate(sample_rate)
+        pres = _as_float_array("pressure_pa", self.pressure_pa if pressure_pa is None else pressure_pa, None)
         if pres.ndim not in (1, 2) or pres.shape[-1] != 2:
             raise InputError(f"input pressure_pa: expected shape ([B] x 2) (link 1, link 2), got {pres.shape}")
         if replay:
             if encoder_t is None or encoder_q is None:
                 raise InputError("input: replay needs both encoder_t (N,) and encoder_q ([B] x N x 3)")
             times = _as_float_array("encoder_t", encoder_t, 1)
-            vals = np.asarray(encoder_q, dtype=np.float64)
+            vals = _as_float_array("encoder_q", encoder_q, None)
             if vals.ndim not in (2, 3) or vals.shape[-1] != 3 or vals.shape[-2] != times.shape[0]:
                 raise InputError(f"input encoder_q: expected shape ([B] x {times.shape[0]} x 3), got {vals.shape}")
             drive = "replay"
         else:
             if duration is None:
                 raise InputError("input duration: a torque-driven run needs a duration [s]")
-            tq = np.zeros(3) if torque is None else np.asarray(torque, dtype=np.float64)
+            duration = _duration(duration)
+            tq = np.zeros(3) if torque is None else _as_float_array("torque", torque, None)
             if tq.shape[-1:] != (3,):
                 raise InputError(f"input torque: last axis must have 3 motor torques, got shape {tq.shape}")
             if tq.ndim == 1:
@@ -613,7 +656,7 @@ class Model:
             iv,
             None if replay else float(duration),  # type: ignore[arg-type]
             1.0 / float(sample_rate),
-            int(threads),
+            _threads(threads),
             bool(check_step),
             fx_b,
             None if log is None else os.fspath(log),
@@ -704,11 +747,15 @@ class Model:
 
         text = task.to_toml()
         base, nph = _core.check_control(self._m, text, "<task>")
-        pay = np.array(self.payload_kg if payload_kg is None else payload_kg, dtype=np.float64).reshape(-1)
-        pres = np.array(self.pressure_pa if pressure_pa is None else pressure_pa, dtype=np.float64)
+        pay = _as_float_array("payload_kg", self.payload_kg if payload_kg is None else payload_kg, None).reshape(-1)
+        if pay.size == 0:
+            raise InputError("input payload_kg: expected a scalar or shape (B,) with B >= 1, got an empty array")
+        duration = _duration(duration)
+        sample_rate = _rate(sample_rate)
+        pres = _as_float_array("pressure_pa", self.pressure_pa if pressure_pa is None else pressure_pa, None)
         if pres.ndim not in (1, 2) or pres.shape[-1] != 2:
             raise InputError(f"input pressure_pa: expected shape ([B] x 2) (link 1, link 2), got {pres.shape}")
-        q0a = np.asarray(q0, dtype=np.float64)
+        q0a = _as_float_array("q0", q0, None)
         if q0a.ndim not in (1, 2) or q0a.shape[-1] != 3:
             raise InputError(f"input q0: expected shape ([B] x 3) motor angles [rad], got {q0a.shape}")
         if gains is None:
@@ -737,7 +784,7 @@ class Model:
             1.0 / float(sample_rate),
             np.ascontiguousarray(g_b),
             fx_b,
-            int(threads),
+            _threads(threads),
             bool(check_step),
             "<task>",
         )

@@ -306,6 +306,8 @@ class ReplayProblem:
     ) -> None:
         if not isinstance(run, MeasuredRun):
             raise InputError(f"input run: expected a popup.MeasuredRun (popup.read_run), got {type(run).__name__}")
+        if _parent is None:
+            run.check()  # a data glitch is named here, never blamed on missing physics
         self.model = model
         self.run = run
         self.threads = int(threads)

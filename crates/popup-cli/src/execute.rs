@@ -92,7 +92,7 @@ pub struct Outcome {
     pub status: Status,
     /// Summary metrics.
     pub metrics: Metrics,
-    /// Samples dropped from the log for non-finite values.
+    /// Non-finite values left out of the log (their samples' finite values are kept).
     pub nonfinite: usize,
     /// Warnings of the run (pressure clamped, ...).
     pub warnings: Vec<String>,

@@ -89,9 +89,10 @@ enum Cmd {
         /// Also write one MCAP log per run (DIR/run_NNNN.mcap).
         #[arg(long)]
         mcap: bool,
-        /// Worker threads (0 = all cores).
-        #[arg(long, default_value_t = 0)]
-        threads: usize,
+        /// Worker threads (0 = all cores; more than the cores are capped at them, more than
+        /// 4 per core refused).
+        #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+        threads: i64,
         /// Simulated time per run [s] (default: the scenario's).
         #[arg(long)]
         duration: Option<f64>,
@@ -221,6 +222,9 @@ fn run_scenario(path: &Path, out: &Path, duration: Option<f64>, seed: Option<u64
     if let Some(s) = seed {
         sc.seed = s;
     }
+    for w in sc.nonfinite_warnings() {
+        eprintln!("popup: warning: {}: {w}", path.display());
+    }
     let (stop, armed) = StopFlags::register();
     let mut prog = Progress::new(mode, sc.closed.duration, sc.log.flush_every_s, stop.clone());
     let mut extra = std::collections::BTreeMap::new();
@@ -244,7 +248,7 @@ fn run_scenario(path: &Path, out: &Path, duration: Option<f64>, seed: Option<u64
         m.peak_ratio[1],
         m.wrinkle_alarms,
         if m.wrinkle_alarms == 1 { "" } else { "s" },
-        if o.nonfinite > 0 { format!("; {} non-finite samples dropped", o.nonfinite) } else { String::new() }
+        if o.nonfinite > 0 { format!("; {} non-finite values left out of the log (their samples kept)", o.nonfinite) } else { String::new() }
     );
     Ok(match o.status {
         popup_core::control::closed_loop::Status::Completed => 0,
@@ -258,6 +262,9 @@ fn go(cli: Cli) -> popup_core::Result<i32> {
         Cmd::Run { scenario, out, duration, seed, progress } => return run_scenario(&scenario, &out, duration, seed, progress),
         Cmd::Check { scenario } => {
             let Some(sc) = read_scenario(&scenario) else { return Ok(2) };
+            for w in sc.nonfinite_warnings() {
+                eprintln!("popup: warning: {}: {w}", scenario.display());
+            }
             println!(
                 "{}: ok: arm {}, payload {} kg, pressures {:?} Pa, {} phase{}, {} s at dt = {} s, sensors at {} Hz",
                 scenario.display(),
@@ -278,6 +285,7 @@ fn go(cli: Cli) -> popup_core::Result<i32> {
             ))
         }
         Cmd::Sweep { scenario, params, out, mcap, threads, duration, seed, parquet: false } => {
+            let threads = popup_core::limits::threads("--threads", threads)?;
             let axes = params.iter().map(|p| sweep::parse_axis(p)).collect::<popup_core::Result<Vec<_>>>()?;
             if let Some(d) = duration {
                 execute::check_duration("--duration", d)?;

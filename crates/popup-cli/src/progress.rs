@@ -183,4 +183,11 @@ impl Sink for Watch<'_> {
         let f = self.inner.state(s)?;
         Ok(if f == Flow::Stop { Flow::Stop } else { self.progress.on_state(s.t) })
     }
+    fn poll(&mut self) -> Flow {
+        if self.inner.poll() == Flow::Stop || self.progress.stop.raised() {
+            Flow::Stop
+        } else {
+            Flow::Go
+        }
+    }
 }

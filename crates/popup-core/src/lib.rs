@@ -21,6 +21,7 @@ pub mod error;
 pub mod forward;
 pub mod integrate;
 pub mod kinematics;
+pub mod limits;
 pub mod linear;
 pub mod math;
 pub mod model;

@@ -6,7 +6,8 @@
 use crate::error::Result;
 use crate::model::Model;
 use crate::params::{ParamData, Params};
-use crate::sim::{run, RunConfig, Trajectory};
+use crate::sim::{run, run_until, RunConfig, Trajectory};
+use std::sync::atomic::AtomicBool;
 
 /// One job of a batch.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,7 +30,16 @@ pub fn run_job(model: &Model, job: &Job) -> Result<Trajectory> {
 /// Run a batch on `threads` threads (0 = all cores; 1 = sequential on this thread).
 /// Results are in job order.
 pub fn rollout(model: &Model, jobs: &[Job], threads: usize) -> Vec<Result<Trajectory>> {
-    par_map(jobs, threads, |j| run_job(model, j))
+    rollout_until(model, jobs, threads, &AtomicBool::new(false))
+}
+
+/// [`rollout`] that stops once `stop` is raised (e.g. by a Ctrl-C watcher): running jobs
+/// end with the samples they have, jobs not started yet end with no samples.
+pub fn rollout_until(model: &Model, jobs: &[Job], threads: usize, stop: &AtomicBool) -> Vec<Result<Trajectory>> {
+    par_map(jobs, threads, |j| {
+        let pd = ParamData::new(model, &j.params)?;
+        run_until(model, &pd, &j.run, stop)
+    })
 }
 
 /// `f` over `items` on `threads` threads (0 = all cores; 1 = sequential on this thread),

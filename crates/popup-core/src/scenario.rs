@@ -567,6 +567,32 @@ impl Scenario {
         Model::compile(&self.arm, self.options)
     }
 
+    /// What the scenario can already tell will produce non-finite outputs: a link at zero
+    /// pressure has a zero wrinkling moment M_w, so its `m*_ratio` (|M|/M_w) channel is
+    /// infinite (left out of the log, counted in `nonfinite_dropped`).
+    pub fn nonfinite_warnings(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut check = |where_: &str, p: [f64; 2]| {
+            for (l, &v) in p.iter().enumerate() {
+                if v == 0.0 {
+                    out.push(format!(
+                        "{where_} pressure_pa[{l}] (link {}) = 0 Pa: the wrinkling moment M_w of link {} is 0, so m{}_ratio = |M|/M_w is infinite and will be left out of the log (the other channels are kept); use a pressure > 0 unless the deflated link is intended",
+                        l + 1,
+                        l + 1,
+                        l + 1
+                    ));
+                }
+            }
+        };
+        check("initial", self.params.pressure_pa);
+        for (i, ph) in self.closed.sequence.phases.iter().enumerate() {
+            if let Some(p) = ph.pressure_pa {
+                check(&format!("phases[{i}] ({})", ph.name), p);
+            }
+        }
+        out
+    }
+
     /// The run as a measured-run `experiment.toml` (`shared/spec/measured-run.md`):
     /// `format = "popup-run/1"`, the arm (its name, or the arm file's path), the initial
     /// payload and pressures, gravity, `replay = "reference"`, the description and the

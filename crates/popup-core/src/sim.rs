@@ -4,8 +4,9 @@
 use crate::drive::{Drive, Spline3};
 use crate::effects::play;
 use crate::control::machine::Event;
-use crate::stream::{either, Collect, DelayLine, Flow, Sink, StateView};
+use crate::stream::{either, Collect, DelayLine, Flow, Sink, StateView, Stoppable};
 use crate::error::{Error, Result};
+use crate::limits::{check_steps, num, POLL_EVERY_STEPS};
 use crate::forward::{locked_moments_at, prescribe};
 use crate::integrate::{step_with, Workspace};
 use crate::math::VecN;
@@ -218,14 +219,42 @@ pub(crate) fn track_alarms(open: &mut [Option<usize>; 2], alarms: &mut Vec<Alarm
     }
 }
 
+/// The sample interval in steps of `dt` for `sample_period` [s]: finite, > 0, a whole
+/// multiple of `dt` and not longer than [`crate::limits::MAX_STEPS`] steps.
+///
+/// # Errors
+/// [`Error::Input`] naming `sample_period`.
+pub fn check_sample_period(sample_period: f64, dt: f64) -> Result<usize> {
+    if !(sample_period.is_finite() && sample_period > 0.0) {
+        return Err(Error::input("sample_period", format!("{} s must be finite and > 0", num(sample_period))));
+    }
+    let r = (sample_period / dt).round().max(1.0);
+    if r > crate::limits::MAX_STEPS || (r * dt - sample_period).abs() > 1e-9 * sample_period {
+        return Err(Error::input(
+            "sample_period",
+            format!("{} s is not a whole multiple of dt = {} s (sample rate must divide the physics rate)", num(sample_period), num(dt)),
+        ));
+    }
+    Ok(r as usize)
+}
+
 /// Run one simulation.
 ///
 /// # Errors
 /// Bad config ([`Error::Input`]), [`Error::StepTooLarge`], [`Error::Diverged`], or the
 /// static-equilibrium error for the initial state.
 pub fn run(model: &Model, pd: &ParamData, cfg: &RunConfig) -> Result<Trajectory> {
+    run_until(model, pd, cfg, &std::sync::atomic::AtomicBool::new(false))
+}
+
+/// [`run`] that ends early, with the samples produced so far, once `stop` is raised (seen
+/// within [`POLL_EVERY_STEPS`] steps): the caller (e.g. a Ctrl-C watcher) knows it asked.
+///
+/// # Errors
+/// As [`run`].
+pub fn run_until(model: &Model, pd: &ParamData, cfg: &RunConfig, stop: &std::sync::atomic::AtomicBool) -> Result<Trajectory> {
     let mut col = Collect::default();
-    let end = run_into(model, pd, cfg, &mut col)?;
+    let end = run_into(model, pd, cfg, &mut Stoppable { inner: &mut col, flag: stop })?;
     Ok(Trajectory { data: col.data, nsample: end.nsample, alarms: end.alarms, final_state: end.final_state, warnings: pd.warnings.clone() })
 }
 
@@ -274,20 +303,10 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
         (Drive::Torque(_) | Drive::Hold(_), Some(d)) => (cfg.initial.map_or(0.0, |s| s.t), d),
         (Drive::Torque(_) | Drive::Hold(_), None) => return Err(Error::input("duration", "a torque-driven run needs a duration")),
     };
-    if !(duration.is_finite() && duration >= 0.0) {
-        return Err(Error::input("duration", format!("{duration} s must be finite and >= 0")));
-    }
-    if !(cfg.sample_period.is_finite() && cfg.sample_period > 0.0) {
-        return Err(Error::input("sample_period", format!("{} s must be finite and > 0", cfg.sample_period)));
-    }
-    let every = (cfg.sample_period / dt).round().max(1.0) as usize;
-    if ((every as f64) * dt - cfg.sample_period).abs() > 1e-9 * cfg.sample_period {
-        return Err(Error::input(
-            "sample_period",
-            format!("{} s is not a whole multiple of dt = {dt} s (sample rate must divide the physics rate)", cfg.sample_period),
-        ));
-    }
-    let nstep = (duration / dt + 1e-9).floor() as usize;
+    let what = if matches!(cfg.drive, Drive::Replay(_)) && cfg.duration.is_none() { "replay span" } else { "duration" };
+    // bounded work: the step count is checked before the loop starts
+    let nstep = check_steps(what, duration, dt)?;
+    let every = check_sample_period(cfg.sample_period, dt)?;
     let fx = &pd.params.effects;
     let (drive, encoder) = effect_drive(model, pd, &cfg.drive)?;
     let cfg = &RunConfig { drive, ..cfg.clone() };
@@ -340,6 +359,9 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
     let mut flow = either(f0, write(&st, ratio, &mut row, sink)?);
     let mut ws = Workspace::new();
     for k in 0..nstep {
+        if k % POLL_EVERY_STEPS == POLL_EVERY_STEPS - 1 {
+            flow = either(flow, sink.poll());
+        }
         if flow == Flow::Stop {
             break;
         }

@@ -63,6 +63,46 @@ pub trait Sink {
     fn state(&mut self, _s: &StateView<'_>) -> Result<Flow> {
         Ok(Flow::Go)
     }
+    /// Asked every [`crate::limits::POLL_EVERY_STEPS`] physics steps, between samples:
+    /// whether the run should stop (a stop request such as Ctrl-C is seen within that
+    /// many steps even when samples are far apart).
+    fn poll(&mut self) -> Flow {
+        Flow::Go
+    }
+}
+
+/// A sink that stops the run once `flag` is raised (checked at every sample, event, state
+/// and poll), passing everything else to `inner`.
+pub struct Stoppable<'a> {
+    /// The sink fed.
+    pub inner: &'a mut dyn Sink,
+    /// Raised (e.g. by a Ctrl-C watcher) to stop the run.
+    pub flag: &'a std::sync::atomic::AtomicBool,
+}
+
+impl Stoppable<'_> {
+    fn flow(&self, f: Flow) -> Flow {
+        either(f, if self.flag.load(std::sync::atomic::Ordering::Relaxed) { Flow::Stop } else { Flow::Go })
+    }
+}
+
+impl Sink for Stoppable<'_> {
+    fn sample(&mut self, row: &[f64; NCH], ctrl: Option<&[f64; NCTRL]>) -> Result<Flow> {
+        let f = self.inner.sample(row, ctrl)?;
+        Ok(self.flow(f))
+    }
+    fn event(&mut self, e: &Event) -> Result<Flow> {
+        let f = self.inner.event(e)?;
+        Ok(self.flow(f))
+    }
+    fn state(&mut self, s: &StateView<'_>) -> Result<Flow> {
+        let f = self.inner.state(s)?;
+        Ok(self.flow(f))
+    }
+    fn poll(&mut self) -> Flow {
+        let f = self.inner.poll();
+        self.flow(f)
+    }
 }
 
 /// A sink that keeps everything: the batch result of a run.
@@ -124,6 +164,9 @@ impl Sink for Tee<'_, '_> {
     }
     fn state(&mut self, s: &StateView<'_>) -> Result<Flow> {
         Ok(either(self.a.state(s)?, self.b.state(s)?))
+    }
+    fn poll(&mut self) -> Flow {
+        either(self.a.poll(), self.b.poll())
     }
 }
 
@@ -301,6 +344,9 @@ impl Sink for Noisy<'_> {
     }
     fn state(&mut self, s: &StateView<'_>) -> Result<Flow> {
         self.inner.state(s)
+    }
+    fn poll(&mut self) -> Flow {
+        self.inner.poll()
     }
 }
 

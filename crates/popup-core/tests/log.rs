@@ -1,5 +1,5 @@
-//! The MCAP logger on its own: non-finite samples are dropped and reported (never a
-//! silent `null`), flushes close chunks so a cut file keeps them, and the decoded
+//! The MCAP logger on its own: non-finite values are left out and reported (never a
+//! silent `null`; their finite siblings are kept), flushes close chunks so a cut file keeps them, and the decoded
 //! messages of a logged closed-loop run equal its arrays.
 
 #![cfg(feature = "mcap")]
@@ -31,7 +31,7 @@ fn messages(bytes: &[u8]) -> Vec<(String, serde_json::Value)> {
 }
 
 #[test]
-fn non_finite_samples_are_dropped_and_reported() {
+fn non_finite_values_are_left_out_and_reported() {
     let m = model(1e-3);
     let pd = ParamData::new(&m, &Params::defaults(&m)).unwrap();
     let st = rest_state(&m, &pd, 0.0, [0.0, 0.5, -0.3]).unwrap();
@@ -57,7 +57,11 @@ fn non_finite_samples_are_dropped_and_reported() {
     assert!(!bytes.windows(4).any(|w| w == b"null"));
     let msgs = messages(&bytes);
     let imu: Vec<_> = msgs.iter().filter(|(t, _)| t == "/popup/imu").collect();
-    assert_eq!(imu.len(), 2, "the two samples with a NaN are dropped from /popup/imu");
+    assert_eq!(imu.len(), 4, "issue 19: a NaN drops only its own key, not the sample");
+    for (k, (_, v)) in imu.iter().enumerate() {
+        assert_eq!(v.get("imu1_ay").is_none(), k >= 2, "{v}");
+        assert_eq!(v["imu1_ax"], 0.5, "finite siblings survive: {v}");
+    }
     assert_eq!(msgs.iter().filter(|(t, _)| t == "/popup/joints").count(), 4, "other topics keep them");
     let errors: Vec<_> = msgs.iter().filter(|(t, v)| t == "/log" && v["level"] == 4).collect();
     assert_eq!(errors.len(), 1, "reported once per topic");

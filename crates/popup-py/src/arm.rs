@@ -146,6 +146,17 @@ fn vec3(p: [f64; 3]) -> Vec3 {
     Vec3::new(p[0], p[1], p[2])
 }
 
+/// Three values of argument `what` (`meaning` says which), or an `InputError` naming it.
+pub(crate) fn three(what: &str, v: &[f64], meaning: &str) -> PyResult<[f64; 3]> {
+    match v {
+        [a, b, c] => Ok([*a, *b, *c]),
+        _ => Err(Python::attach(|py| crate::errors::make(py, "InputError", &format!("input {what}: expected 3 values ({meaning}), got {}", v.len())))),
+    }
+}
+
+const Q3: &str = "joint angles q1, q2, q3 [rad]";
+const P3: &str = "position x, y, z in the base frame [m]";
+
 #[pymethods]
 impl PyRigidArm {
     /// The rigid table `table` (`"as_built"` = Table 1, `"ik"` = Table 2) of `arm`.
@@ -162,19 +173,22 @@ impl PyRigidArm {
     }
 
     /// End-effector position p_WE [m] for joint angles q [rad].
-    fn fk<'py>(&self, py: Python<'py>, q: [f64; 3]) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, self.arm.fk(&q).as_slice())
+    fn fk<'py>(&self, py: Python<'py>, q: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let q = three("q", &q, Q3)?;
+        Ok(PyArray1::from_slice(py, self.arm.fk(&q).as_slice()))
     }
 
     /// Geometric Jacobian (6 × 3): rows linear then angular velocity, base frame.
-    fn jacobian<'py>(&self, py: Python<'py>, q: [f64; 3]) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn jacobian<'py>(&self, py: Python<'py>, q: Vec<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let q = three("q", &q, Q3)?;
         let j = self.arm.jacobian(&q);
         let rows: Vec<Vec<f64>> = (0..6).map(|r| (0..3).map(|c| j[(r, c)]).collect()).collect();
         Ok(PyArray2::from_vec2(py, &rows)?)
     }
 
     /// The four closed-form IK solutions as (q, shoulder, elbow) tuples.
-    fn ik(&self, p: [f64; 3]) -> PyResult<Vec<([f64; 3], &'static str, &'static str)>> {
+    fn ik(&self, p: Vec<f64>) -> PyResult<Vec<([f64; 3], &'static str, &'static str)>> {
+        let p = three("p", &p, P3)?;
         let sols = self.arm.ik(&vec3(p)).py()?;
         Ok(sols
             .iter()
@@ -194,7 +208,8 @@ impl PyRigidArm {
 
     /// Singularity report: dict(elbow, shoulder, elbow_measure, shoulder_measure).
     #[pyo3(signature = (q, tol = 1e-6))]
-    fn singularity<'py>(&self, py: Python<'py>, q: [f64; 3], tol: f64) -> PyResult<Bound<'py, PyDict>> {
+    fn singularity<'py>(&self, py: Python<'py>, q: Vec<f64>, tol: f64) -> PyResult<Bound<'py, PyDict>> {
+        let q = three("q", &q, Q3)?;
         let s = self.arm.singularity(&q, tol);
         let d = PyDict::new(py);
         d.set_item("elbow", s.elbow)?;
@@ -205,18 +220,18 @@ impl PyRigidArm {
     }
 
     /// |det J_v| [m³].
-    fn manipulability(&self, q: [f64; 3]) -> f64 {
-        self.arm.manipulability(&q)
+    fn manipulability(&self, q: Vec<f64>) -> PyResult<f64> {
+        Ok(self.arm.manipulability(&three("q", &q, Q3)?))
     }
 
     /// Raise `UnreachableError` if p [m] is outside the workspace.
-    fn check_reachable(&self, p: [f64; 3]) -> PyResult<()> {
-        self.arm.in_workspace(&vec3(p)).py()
+    fn check_reachable(&self, p: Vec<f64>) -> PyResult<()> {
+        self.arm.in_workspace(&vec3(three("p", &p, P3)?)).py()
     }
 
     /// Frames 0..3 as a (4, 4, 4) array of homogeneous transforms T_W_i.
-    fn frames<'py>(&self, py: Python<'py>, q: [f64; 3]) -> Bound<'py, numpy::PyArray3<f64>> {
-        let f = self.arm.frames(&q);
+    fn frames<'py>(&self, py: Python<'py>, q: Vec<f64>) -> PyResult<Bound<'py, numpy::PyArray3<f64>>> {
+        let f = self.arm.frames(&three("q", &q, Q3)?);
         let mut out = numpy::ndarray::Array3::<f64>::zeros((4, 4, 4));
         for (i, (r, p)) in f.iter().enumerate() {
             for a in 0..3 {
@@ -227,6 +242,6 @@ impl PyRigidArm {
             }
             out[[i, 3, 3]] = 1.0;
         }
-        numpy::PyArray3::from_owned_array(py, out)
+        Ok(numpy::PyArray3::from_owned_array(py, out))
     }
 }

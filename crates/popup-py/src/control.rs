@@ -6,7 +6,7 @@ use crate::model::PyModel;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use popup_core::control::config::{parse_control, ControlFile};
-use popup_core::control::{gain_names, rollout_closed, ClosedLoop, Gains, CTRL_CHANNELS, NCTRL, NG};
+use popup_core::control::{gain_names, rollout_closed_until, ClosedLoop, Gains, CTRL_CHANNELS, NCTRL, NG};
 use popup_core::params::Params;
 use popup_core::sensor::NCH;
 use pyo3::prelude::*;
@@ -63,7 +63,7 @@ pub fn closed_loop_rollout<'py>(
     sample_period: f64,
     gains: Option<PyReadonlyArray2<'py, f64>>,
     effects: Option<PyReadonlyArray2<'py, f64>>,
-    threads: usize,
+    threads: i64,
     check_step: bool,
     source: &str,
 ) -> PyResult<ClosedOut<'py>> {
@@ -89,7 +89,7 @@ pub fn closed_loop_rollout_multi<'py>(
     sample_period: f64,
     gains: Option<PyReadonlyArray2<'py, f64>>,
     effects: Option<PyReadonlyArray2<'py, f64>>,
-    threads: usize,
+    threads: i64,
     check_step: bool,
     source: &str,
 ) -> PyResult<ClosedOut<'py>> {
@@ -115,7 +115,7 @@ fn closed_rollout<'py>(
     sample_period: f64,
     gains: Option<PyReadonlyArray2<'py, f64>>,
     effects: Option<PyReadonlyArray2<'py, f64>>,
-    threads: usize,
+    threads: i64,
     check_step: bool,
     source: &str,
 ) -> PyResult<ClosedOut<'py>> {
@@ -165,8 +165,14 @@ fn closed_rollout<'py>(
         };
         jobs.push((params, run));
     }
+    let threads = crate::errors::threads("threads", threads)?;
+    // bounded work: steps and collected samples are checked before anything runs
+    let dt = model.m.options.dt;
+    let nstep = popup_core::limits::check_steps("duration", duration, dt).py()?;
+    let every = popup_core::sim::check_sample_period(sample_period, dt).py()?;
+    popup_core::limits::check_collected(nb, (nstep / every + 1) as f64, NCH + NCTRL).py()?;
     let m = model.m.clone();
-    let results = py.detach(move || rollout_closed(&m, &jobs, threads));
+    let results = crate::errors::interruptible(py, move |stop| rollout_closed_until(&m, &jobs, threads, stop))?;
     let ns = crate::errors::batch_nsample(&results, |t| t.traj.nsample)?;
     let mut data = Array3::<f64>::from_elem((nb, ns, NCH), f64::NAN);
     let mut ctrl = Array3::<f64>::from_elem((nb, ns, NCTRL), f64::NAN);

@@ -4,6 +4,8 @@
 use popup_core::Error;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 fn class_name(e: &Error) -> &'static str {
     match e {
@@ -78,3 +80,45 @@ pub fn batch_nsample<T>(results: &[popup_core::Result<T>], nsample: impl Fn(&T) 
     }
 }
 
+
+/// A requested thread count, validated by the core's [`popup_core::limits::threads`]
+/// (negative or absurd counts refused naming `what` and the machine's cores).
+pub fn threads(what: &str, requested: i64) -> PyResult<usize> {
+    popup_core::limits::threads(what, requested).py()
+}
+
+/// Run `work` without the GIL on a helper thread while this thread checks Python's signal
+/// handlers every 100 ms: on Ctrl-C (KeyboardInterrupt, or any error a handler raises) the
+/// stop flag handed to `work` is raised, the work is awaited (it ends within
+/// [`popup_core::limits::POLL_EVERY_STEPS`] steps) and the handler's error is returned.
+pub fn interruptible<R: Send>(py: Python<'_>, work: impl FnOnce(&AtomicBool) -> R + Send) -> PyResult<R> {
+    let flag = AtomicBool::new(false);
+    let me = std::thread::current();
+    let mut pending: Option<PyErr> = None;
+    let out = std::thread::scope(|s| {
+        let flag = &flag;
+        let h = s.spawn(move || {
+            let r = work(flag);
+            me.unpark();
+            r
+        });
+        while !h.is_finished() {
+            py.detach(|| std::thread::park_timeout(Duration::from_millis(100)));
+            if pending.is_none() && !h.is_finished() {
+                if let Err(e) = py.check_signals() {
+                    pending = Some(e);
+                    flag.store(true, Ordering::SeqCst);
+                }
+            }
+        }
+        py.detach(|| h.join())
+    });
+    let out = match out {
+        Ok(r) => r,
+        Err(panic) => std::panic::resume_unwind(panic),
+    };
+    match pending {
+        Some(e) => Err(e),
+        None => Ok(out),
+    }
+}

@@ -37,6 +37,13 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
         presets.set_item(name, d)?;
     }
     m.add("BEAM_PRESETS", presets)?;
+    // the one registry of bounds and measured-data plausibility limits (popup_core::limits)
+    let lim: Vec<(Vec<&str>, &str, f64, f64, f64, &str)> =
+        popup_core::limits::CHANNEL_LIMITS.iter().map(|l| (l.columns.to_vec(), l.unit, l.min, l.warn_abs, l.error_abs, l.advice)).collect();
+    m.add("CHANNEL_LIMITS", lim)?;
+    m.add("GAP_WARN_STEPS", popup_core::limits::GAP_WARN_STEPS)?;
+    m.add("GAP_ERROR_STEPS", popup_core::limits::GAP_ERROR_STEPS)?;
+    m.add("MAX_STEPS", popup_core::limits::MAX_STEPS)?;
     m.add_function(wrap_pyfunction!(cli::run_cli, m)?)?;
     m.add_function(wrap_pyfunction!(control::closed_loop_rollout, m)?)?;
     m.add_function(wrap_pyfunction!(control::closed_loop_rollout_multi, m)?)?;

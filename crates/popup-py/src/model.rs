@@ -4,7 +4,7 @@
 //! Python thread cannot mutate them during a run.
 
 use crate::arm::PyArm;
-use crate::errors::{describe, make, IntoPy};
+use crate::errors::{describe, interruptible, make, IntoPy};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use popup_core::drive::{Drive, Linear3, Spline3};
@@ -13,9 +13,10 @@ use popup_core::kinematics::prbm::frames;
 use popup_core::math::VecN;
 use popup_core::model::{Disable, Integrator, Model, Options};
 use popup_core::params::{ParamData, Params};
-use popup_core::rollout::{rollout, Job};
+use popup_core::limits::{check_collected, check_steps};
+use popup_core::rollout::{rollout_until, Job};
 use popup_core::sensor::{CHANNELS, NCH, UNITS};
-use popup_core::sim::{check_step, rest_state, RunConfig, State};
+use popup_core::sim::{check_sample_period, check_step, rest_state, RunConfig, State};
 use popup_core::statics;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -171,7 +172,8 @@ impl PyModel {
 
     /// Joint coordinates (nv,) (7 for the arm file's chain) at rest: motors at `q_motor`, bending joints in static
     /// equilibrium.
-    fn rest_state<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q_motor: [f64; 3]) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    fn rest_state<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2], q_motor: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let q_motor = crate::arm::three("q_motor", &q_motor, "motor angles q1, q2, q3 [rad]")?;
         let pd = self.pd(payload_kg, pressure_pa)?;
         let st = rest_state(&self.m, &pd, 0.0, q_motor).py()?;
         Ok(PyArray1::from_slice(py, &st.q.as_slice()[..self.m.nv]))
@@ -255,7 +257,7 @@ impl PyModel {
         initial_v: Option<PyReadonlyArray2<'py, f64>>,
         duration: Option<f64>,
         sample_period: f64,
-        threads: usize,
+        threads: i64,
         check_step: bool,
         effects: Option<PyReadonlyArray2<'py, f64>>,
         log: Option<String>,
@@ -306,10 +308,20 @@ impl PyModel {
                 run: RunConfig { drive: drv, initial, duration, sample_period, check_step },
             });
         }
+        let threads = crate::errors::threads("threads", threads)?;
+        // bounded work: steps and collected samples are checked before anything runs
+        let dt = self.m.options.dt;
+        let (what, span) = match (is_replay, duration) {
+            (true, None) => ("replay span (last encoder time - first)", t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0)),
+            (_, d) => ("duration", d.unwrap_or(0.0)),
+        };
+        let nstep = check_steps(what, span, dt).py()?;
+        let every = check_sample_period(sample_period, dt).py()?;
+        check_collected(nb, (nstep / every + 1) as f64, NCH).py()?;
         let model = self.m.clone();
         let results = match log {
-            None => py.detach(move || rollout(&model, &jobs, threads)),
-            Some(path) if nb == 1 => vec![py.detach(move || logged(&model, &jobs[0], &path, log_experiment.unwrap_or_default()))],
+            None => interruptible(py, move |stop| rollout_until(&model, &jobs, threads, stop))?,
+            Some(path) if nb == 1 => vec![interruptible(py, move |stop| logged(&model, &jobs[0], &path, log_experiment.unwrap_or_default(), stop))?],
             Some(_) => return Err(bad(format!("input log: one MCAP file logs one run; got a batch of {nb}"))),
         };
         let ns = crate::errors::batch_nsample(&results, |t| t.nsample)?;
@@ -353,17 +365,17 @@ pub fn effect_registry() -> Vec<(&'static str, &'static str, &'static str, usize
 }
 
 /// One open-loop run streamed into an MCAP log and collected.
-fn logged(model: &Model, job: &Job, path: &str, experiment: String) -> popup_core::Result<popup_core::sim::Trajectory> {
+fn logged(model: &Model, job: &Job, path: &str, experiment: String, stop: &std::sync::atomic::AtomicBool) -> popup_core::Result<popup_core::sim::Trajectory> {
     use popup_core::log::{LogOptions, McapLogger, RunMeta};
-    use popup_core::stream::{Collect, Tee};
+    use popup_core::stream::{Collect, Stoppable, Tee};
     let pd = ParamData::new(model, &job.params)?;
     let meta = RunMeta { experiment_toml: experiment, ..RunMeta::default() };
     let mut lg = McapLogger::create(std::path::Path::new(path), model, &LogOptions::default(), &meta, job.run.sample_period, 0.05)?;
     let mut col = Collect::default();
-    let res = popup_core::sim::run_into(model, &pd, &job.run, &mut Tee { a: &mut col, b: &mut lg });
+    let res = popup_core::sim::run_into(model, &pd, &job.run, &mut Stoppable { inner: &mut Tee { a: &mut col, b: &mut lg }, flag: stop });
     match res {
         Ok(end) => {
-            lg.finish("completed")?;
+            lg.finish(if stop.load(std::sync::atomic::Ordering::SeqCst) { "interrupted" } else { "completed" })?;
             Ok(popup_core::sim::Trajectory { data: col.data, nsample: end.nsample, alarms: end.alarms, final_state: end.final_state, warnings: pd.warnings.clone() })
         }
         Err(e) => {

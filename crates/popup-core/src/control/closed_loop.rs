@@ -165,8 +165,16 @@ pub(crate) fn arm_parts(model: &Model, fr: &Frames, payload: f64, payload_radius
 /// [`Error::StepTooLarge`] from the step check. A run that goes unstable is not an error: it
 /// ends in the `Unstable` fault (see [`Status`]).
 pub fn run_closed_loop(model: &Model, params: &Params, cfg: &ClosedLoop) -> Result<ClosedTrajectory> {
+    run_closed_loop_until(model, params, cfg, &std::sync::atomic::AtomicBool::new(false))
+}
+
+/// [`run_closed_loop`] that ends (status `Interrupted`, the rest NaN) once `stop` is raised.
+///
+/// # Errors
+/// As [`run_closed_loop`].
+pub fn run_closed_loop_until(model: &Model, params: &Params, cfg: &ClosedLoop, stop: &std::sync::atomic::AtomicBool) -> Result<ClosedTrajectory> {
     let mut col = Collect::default();
-    let end = run_closed_loop_into(model, params, cfg, &mut col)?;
+    let end = run_closed_loop_into(model, params, cfg, &mut crate::stream::Stoppable { inner: &mut col, flag: stop })?;
     let (mut data, mut control) = (col.data, col.ctrl);
     data.resize(end.nsample_full * NCH, f64::NAN);
     control.resize(end.nsample_full * NCTRL, f64::NAN);
@@ -199,13 +207,9 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
             format!("controller period T = {period:e} s must be a whole multiple of the physics step dt = {dt:e} s (set dt = T/n)"),
         ));
     }
-    if !(cfg.duration.is_finite() && cfg.duration >= 0.0) {
-        return Err(Error::input("duration", format!("{} s must be finite and >= 0", cfg.duration)));
-    }
-    let every = (cfg.sample_period / dt).round().max(1.0) as usize;
-    if !(cfg.sample_period.is_finite() && cfg.sample_period > 0.0) || ((every as f64) * dt - cfg.sample_period).abs() > 1e-9 * cfg.sample_period {
-        return Err(Error::input("sample_period", format!("{} s must be > 0 and a whole multiple of dt = {dt} s", cfg.sample_period)));
-    }
+    // bounded work: the step count is checked before the loop starts
+    let nstep = crate::limits::check_steps("duration", cfg.duration, dt)?;
+    let every = crate::sim::check_sample_period(cfg.sample_period, dt)?;
     if !(cfg.payload_radius.is_finite() && cfg.payload_radius >= 0.0) {
         return Err(Error::param("payload_radius", cfg.payload_radius, "must be finite and >= 0 m"));
     }
@@ -238,7 +242,6 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
     if cfg.check_step {
         check_step(model, &pd, &st.q, false)?;
     }
-    let nstep = (cfg.duration / dt + 1e-9).floor() as usize;
     let nsample_full = nstep / every + 1;
     let sd = &params.effects.sensor_delay;
     let mut line = DelayLine::for_sensors(every as f64 * dt, sd, true);
@@ -537,7 +540,7 @@ pub fn run_closed_loop_into(model: &Model, params: &Params, cfg: &ClosedLoop, si
                 phase_ticks += 1;
             }
         }
-        let mut flow = Flow::Go;
+        let mut flow = if k % crate::limits::POLL_EVERY_STEPS == crate::limits::POLL_EVERY_STEPS - 1 { sink.poll() } else { Flow::Go };
         while emitted < events.len() {
             flow = either(flow, sink.event(&events[emitted])?);
             emitted += 1;
@@ -600,5 +603,10 @@ fn reference(cmd: &Command, el: f64, q_start: &[f64; 3]) -> [f64; 3] {
 /// Run a batch of closed-loop jobs on `threads` threads (0 = all cores); results in job
 /// order, bit-identical for any thread count.
 pub fn rollout_closed(model: &Model, jobs: &[(Params, ClosedLoop)], threads: usize) -> Vec<Result<ClosedTrajectory>> {
-    crate::rollout::par_map(jobs, threads, |(p, c)| run_closed_loop(model, p, c))
+    rollout_closed_until(model, jobs, threads, &std::sync::atomic::AtomicBool::new(false))
+}
+
+/// [`rollout_closed`] that stops once `stop` is raised (runs end `Interrupted`).
+pub fn rollout_closed_until(model: &Model, jobs: &[(Params, ClosedLoop)], threads: usize, stop: &std::sync::atomic::AtomicBool) -> Vec<Result<ClosedTrajectory>> {
+    crate::rollout::par_map(jobs, threads, |(p, c)| run_closed_loop_until(model, p, c, stop))
 }

@@ -18,7 +18,7 @@ pub mod reference;
 
 use crate::error::{Error, Result};
 use crate::sim::State;
-pub use closed_loop::{rollout_closed, run_closed_loop, ClosedTrajectory, Status, CTRL_CHANNELS, NCTRL};
+pub use closed_loop::{rollout_closed, rollout_closed_until, run_closed_loop, run_closed_loop_until, ClosedTrajectory, Status, CTRL_CHANNELS, NCTRL};
 pub use machine::{Command, Event, FaultPolicy, Guard, Phase, Sequence};
 pub use motor::Motoreducer;
 pub use reference::Signal;

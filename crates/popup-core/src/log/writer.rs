@@ -35,7 +35,8 @@ pub struct RunMeta {
 pub struct LogEnd {
     /// Samples logged.
     pub samples: usize,
-    /// Sample messages dropped because they held a non-finite value.
+    /// Non-finite values left out of their messages (the finite keys of the same sample
+    /// are written; a sample with a non-finite time counts all its values).
     pub nonfinite_dropped: usize,
     /// Time of the last sample [s] (NaN if none).
     pub t_last: f64,
@@ -258,15 +259,29 @@ impl<W: Write + Seek> Sink for McapLogger<'_, W> {
                 (Source::Control, None) => continue,
             };
             let names = tp.names();
-            // d_min = +inf means "no obstacle": the key is left out, not an error
-            let bad = vals.iter().zip(names).find(|(v, n)| !v.is_finite() && !(**n == "d_min" && **v == f64::INFINITY));
-            if let Some((v, n)) = bad.map(|(v, n)| (*v, *n)).or(if t.is_finite() { None } else { Some((t, "t")) }) {
-                self.nonfinite += 1;
+            // a non-finite value is left out of its message (its key absent: a missing
+            // sample), never its finite siblings; d_min = +inf means "no obstacle", not an error
+            let is_bad = |v: f64, n: &str| !(v.is_finite() || (n == "d_min" && v == f64::INFINITY));
+            let nbad = vals.iter().zip(names).filter(|(v, n)| is_bad(**v, n)).count();
+            if !t.is_finite() {
+                // no time, no sample: the whole group is dropped
+                self.nonfinite += vals.len();
+            } else {
+                self.nonfinite += nbad;
+            }
+            let first = vals.iter().zip(names).find(|(v, n)| is_bad(**v, n)).map(|(v, n)| (*v, *n));
+            if let Some((v, n)) = if t.is_finite() { first } else { Some((t, "t")) } {
                 if !self.reported[i] {
                     self.reported[i] = true;
-                    let msg = format!("non-finite value {n} = {v} on {} at t = {t} s: sample dropped (further drops on this topic are counted in run_end)", tp.topic);
+                    let what = if t.is_finite() { format!("key {n} left out, the other keys written") } else { "sample dropped".to_string() };
+                    let msg = format!(
+                        "non-finite value {n} = {v} on {} at t = {t} s: {what} (further non-finite values on this topic are counted in run_end.nonfinite_dropped)",
+                        tp.topic
+                    );
                     self.write_log(ns, Level::Error, "popup.log", &msg)?;
                 }
+            }
+            if !t.is_finite() {
                 continue;
             }
             self.buf.clear();
