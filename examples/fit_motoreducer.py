@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import os
 import tempfile
 import time
@@ -52,9 +53,13 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 import popup
+
 from popup.control import Controller, Phase, Task, const, sine
 
-THESIS = {0.1: 707.0, 1.0: 151.0, 3.0: 49.0}
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import thesis_data  # noqa: E402  (the thesis's numbers, one copy)
+
+THESIS = {a: thesis_data.TABLES_5_7[2.0]["prbm"][a] for a in (0.1, 1.0, 3.0)}  # Table 5, PRBM column
 """Thesis cut-offs [rad/s] of the velocity loop at Kp = 5000, Ki = 100, by reference amplitude [rad/s]."""
 KP_TREND = (500.0, 1000.0, 2000.0, 5000.0, 10000.0)
 KP, KI = 5000.0, 100.0

@@ -66,6 +66,7 @@ import argparse
 import functools
 import math
 import re
+import sys
 import time
 import tomllib
 from pathlib import Path
@@ -75,6 +76,9 @@ import numpy as np
 
 import popup
 from popup import frequency as fr
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import thesis_data  # noqa: E402  (examples/thesis_data.py: the thesis's numbers, one copy)
 from popup.control import Controller
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,18 +87,9 @@ PAYLOADS = (0.0, 1.0, 2.0)
 KP_TREND = (500.0, 1000.0, 2000.0, 5000.0, 10000.0)
 
 # ----------------------------------------------------------------------------- thesis values
-THESIS_T3 = {  # Table 3: p [kPa] -> (k [N·m/rad], c [N·m·s/rad], f_s [Hz]) of the 55 mm link
-    10: (321, 0.557, 15.04),
-    20: (347, 0.547, 15.63),
-    30: (360, 0.463, 15.94),
-    40: (370, 0.450, 16.17),
-    50: (382, 0.433, 16.44),
-    60: (388, 0.429, 16.56),
-    70: (392, 0.412, 16.65),
-    80: (401, 0.407, 16.83),
-    90: (405, 0.406, 16.93),
-}
-THESIS_CUTOFF = {0.1: 707.0, 1.0: 151.0, 3.0: 49.0}
+THESIS_T3 = thesis_data.TABLE3
+"""Table 3 (examples/thesis_data.py, the one copy of the thesis's numbers)."""
+THESIS_CUTOFF = {a: thesis_data.TABLES_5_7[2.0]["prbm"][a] for a in (0.1, 1.0, 3.0)}
 """Tables 5–8: velocity-loop cut-off [rad/s] vs reference amplitude [rad/s] (one link – one
 motoreducer, 2 kg, gravity off, Kp = 5000)."""
 THESIS_KP: Dict[float, Optional[float]] = {k: None for k in KP_TREND}
