@@ -86,10 +86,16 @@ _LONG_RUN = textwrap.dedent(
 )
 
 
+def _default_sigint() -> None:
+    """In the child: SIGINT back to its default (a shell's background job starts with it
+    ignored, and Python then installs no KeyboardInterrupt handler)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
 @pytest.mark.parametrize("kind", ["replay", "batch", "closed_loop"])
 def test_ctrl_c_stops_a_long_run_from_python(kind):
-    p = subprocess.Popen([sys.executable, "-c", _LONG_RUN, kind], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen([sys.executable, "-c", _LONG_RUN, kind], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
     try:
         assert p.stdout is not None
         assert p.stdout.readline().strip() == "start"

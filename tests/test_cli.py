@@ -205,6 +205,12 @@ def test_missing_dependency_is_not_hidden(monkeypatch):
         cli.main(["fake"])
 
 
+def _default_sigint() -> None:
+    """In the child: SIGINT back to its default (a shell's background job starts with it
+    ignored, and Python then installs no KeyboardInterrupt handler)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
 def test_ctrl_c_stops_a_rust_run():
     # without the GIL, Python's SIGINT handler would never run: the run must die like the binary
@@ -213,6 +219,7 @@ def test_ctrl_c_stops_a_rust_run():
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_default_sigint,
     )
     try:
         time.sleep(3.0)
