@@ -63,7 +63,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
@@ -593,9 +593,9 @@ def _candidates(effect: str, prob: ReplayProblem, free: List[Tuple[fx.EffectPara
     return cands
 
 
-def _absent_entries(structure: Optional[Dict[str, Any]]) -> set:
+def _absent_entries(structure: Optional[Dict[str, Any]]) -> Set[int]:
     """Joint/link entries a structure leaves out (an infinite stiffness: that link rigid)."""
-    out = set()
+    out: Set[int] = set()
     for v in (structure or {}).values():
         if isinstance(v, (list, tuple)):
             out.update(i for i, x in enumerate(v) if isinstance(x, float) and math.isinf(x))
