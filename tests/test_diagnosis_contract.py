@@ -53,6 +53,26 @@ def test_noise_only_channels_do_not_hide_the_finding(nominal, friction_run):
     assert h.conclusion.startswith("Added joint_friction")
 
 
+def test_a_refit_beyond_the_step_is_rerun_at_a_smaller_step(nominal, friction_run, monkeypatch):
+    """A joint refit that moves a stiffness beyond what the candidate's step was chosen for
+    fails the step check: the refit is repeated at half the step, not the whole round lost."""
+    orig = dg._refit
+    seen = []
+
+    def stiff(prob, *a, **kw):
+        seen.append(prob.model.dt)
+        if prob.model.dt > 0.6e-3:
+            raise popup.StepTooLargeError("time step dt = 1e-3 s is too large (injected)")
+        return orig(prob, *a, **kw)
+
+    monkeypatch.setattr(dg, "_refit", stiff)
+    h = dg.improve(nominal, friction_run, effects=["joint_friction"], max_rounds=1)
+    assert h.complete and h.effects == ["joint_friction"], h.error
+    assert seen[:2] == [pytest.approx(1e-3), pytest.approx(0.5e-3)]
+    assert h.steps[-1].model.dt == pytest.approx(0.5e-3)
+    assert h.steps[-1].error < 0.5 * h.steps[0].error
+
+
 def test_a_failing_round_keeps_what_finished(nominal, friction_run, monkeypatch, capsys, tmp_path):
     calls = {"n": 0}
     orig = dg.diagnose

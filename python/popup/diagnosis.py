@@ -70,7 +70,7 @@ import numpy as np
 from . import effects as fx
 from . import estimate as est
 from .compare import Comparison, compare
-from .exceptions import InputError
+from .exceptions import InputError, StepTooLargeError
 from .io import MeasuredRun
 from .problem import ERROR_DEFINITION, ReplayProblem
 
@@ -912,7 +912,7 @@ def improve(
             cprob = prob.with_model(cand)
             if progress is not None:
                 progress({"round": rnd + 1, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
-            current, cprob, ci = _refit(cprob, added, fitted_params, max_iter)
+            current, cprob, ci = _refit_stable(cprob, added, fitted_params, max_iter)
             err, per = cprob.error()
             steps.append(HistoryStep(list(added), {e: current.effects.get(e, {}) for e in added}, err, per, current,
                                      validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci))
@@ -922,7 +922,7 @@ def improve(
                 if not _still_needed(cprob, e, fitted_params[e]):
                     added.remove(e)
                     fitted_params.pop(e)
-                    current, cprob, ci = _refit(prob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
+                    current, cprob, ci = _refit_stable(prob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
                     err, per = cprob.error()
                     steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
                                              validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e))
@@ -954,6 +954,26 @@ def _still_needed(prob: ReplayProblem, effect: str, params: Sequence[str]) -> bo
     lr, neff = est.log_ratio(prob, z_wo, z, prob.train)
     k = len(est.free_params(effect, list(params) or None))
     return lr - k * math.log(neff) > SCORE_THRESHOLD
+
+
+#: Halvings of the step tried when a refitted model fails the step check.
+_STEP_HALVINGS = 3
+
+
+def _refit_stable(prob: ReplayProblem, added: List[str], fitted: Dict[str, List[str]], max_iter: int) -> Tuple["Model", ReplayProblem, Dict[str, Dict[str, List[float]]]]:
+    """:func:`_refit`, at half the step (up to :data:`_STEP_HALVINGS` times) when the
+    refitted model leaves the step's stability region (a stiffness the joint refit moved
+    beyond what the candidate's step was chosen for, or a pose where a mode is faster)."""
+    for k in range(_STEP_HALVINGS + 1):
+        try:
+            out = _refit(prob, added, fitted, max_iter)
+            out[1].error()  # the refitted model runs at this step
+            return out
+        except StepTooLargeError:
+            if k == _STEP_HALVINGS:
+                raise
+            prob = prob.with_model(prob.model.with_dt(0.5 * prob.model.dt))
+    raise AssertionError("unreachable")
 
 
 def _refit(prob: ReplayProblem, added: List[str], fitted: Dict[str, List[str]], max_iter: int) -> Tuple["Model", ReplayProblem, Dict[str, Dict[str, List[float]]]]:
