@@ -23,9 +23,10 @@ Intervals and identifiability (:func:`uncertainty`)
 --------------------------------------------------
 Gauss–Newton covariance ``s² (JᵀJ)⁻¹`` of the weighted problem, inflated by ``n/n_eff``,
 or the delete-one-block jackknife variance over :data:`JACKKNIFE_BLOCKS` time blocks
-where that is larger (a residual that is not white everywhere); 95 % half-widths. Before reporting them, the scaled Fisher matrix is checked: its rank
-and condition number, the correlations between parameters, parameters at a bound and
-parameters whose interval is wider than their own scale. Such parameters are listed as
+where that is larger (a residual that is not white everywhere); 95 % half-widths.
+Before reporting them, the scaled Fisher matrix is checked: its rank and condition
+number, the correlations between parameters, parameters at a bound and parameters whose
+interval is wider than their own scale. Such parameters are listed as
 not identifiable from this run (their interval is reported as ``inf``), instead of a
 tight local interval the data cannot support.
 
