@@ -15,6 +15,11 @@ use crate::math::{cholesky_solve, Mat3, MatN, VecN};
 use crate::model::Model;
 use crate::params::ParamData;
 
+/// Which motor rows are free in replay (the link side of a `backlash` gap), per motor.
+pub type FreeMotors = [bool; 3];
+/// Every motor row prescribed (no joint inside its gap).
+pub const ALL_PRESCRIBED: FreeMotors = [false; 3];
+
 /// Passive joint forces `−k δ − c δ̇` on the bending and torsion joints at time `t` [N·m]
 /// (respecting `disable`; with `pressure_leak` the bending k, c follow p(t); with
 /// `wrinkling` the bending springs are bilinear, see [`crate::effects`]).
@@ -203,25 +208,34 @@ pub fn accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: 
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub fn accel_with(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN) -> VecN {
+    accel_free(model, pd, drive, t, q, v, am, h_implicit, m, &ALL_PRESCRIBED)
+}
+
+/// [`accel_with`] where the motor rows marked in `free` are not prescribed in replay: they
+/// are the link side of a `backlash` gap, a free joint whose own inertia is the gear's
+/// link-side `inertia` instead of the motor's armature ([`crate::backlash`]).
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn accel_free(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN, free: &FreeMotors) -> VecN {
     let rot = model.rotations(q);
     crba_into(model, &pd.body, &rot, m);
     let b = rnea(model, &pd.body, &rot, v, &VecN::zeros(), &model.gravity);
-    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, m, &b)
+    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, m, &b, free)
 }
 
 /// [`accel`] given the bare-chain mass matrix `m` and bias `b` at (q, v).
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &MatN, b: &VecN) -> VecN {
+pub fn solve_accel(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &MatN, b: &VecN, free: &FreeMotors) -> VecN {
     let mut m: MatN = *m;
-    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, &mut m, b)
+    solve_accel_in_place(model, pd, drive, t, q, v, am, h_implicit, &mut m, b, free)
 }
 
 /// [`solve_accel`] that overwrites the leading block of `m` (with the Cholesky factor of the
 /// system matrix).
 #[inline]
 #[allow(clippy::too_many_arguments)]
-fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN, b: &VecN) -> VecN {
+fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, h_implicit: f64, m: &mut MatN, b: &VecN, free: &FreeMotors) -> VecN {
     let n = model.nv;
     let mut rhs = passive(model, pd, t, q, v) - b;
     let fx = &pd.params.effects;
@@ -229,9 +243,7 @@ fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q:
         let rot = model.rotations(q);
         rhs += crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, &rot, v);
     }
-    for i in 0..n {
-        m[(i, i)] += model.armature[i];
-    }
+    add_armature(model, pd, m, free);
     if h_implicit > 0.0 {
         let c = damping_diag(model, pd);
         for i in 0..n {
@@ -252,27 +264,25 @@ fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q:
         (Drive::Torque(_) | Drive::Hold(_), _) => add_drive_torques(model, pd, drive, t, v, &mut rhs),
         (Drive::Replay(_), Some(am)) => {
             for (k, &p) in model.motor_idx.iter().enumerate() {
+                if free[k] {
+                    continue;
+                }
                 for f in 0..n {
                     rhs[f] -= m[(f, p)] * am[k];
                 }
             }
             for (k, &p) in model.motor_idx.iter().enumerate() {
-                for f in 0..n {
-                    m[(f, p)] = 0.0;
-                    m[(p, f)] = 0.0;
+                if free[k] {
+                    continue;
                 }
-                m[(p, p)] = 1.0;
+                hold(m, p, n);
                 rhs[p] = am[k];
             }
         }
         (Drive::Replay(_), None) => unreachable!("replay accelerations must be prescribed"),
     }
     for &p in model.locked() {
-        for f in 0..n {
-            m[(f, p)] = 0.0;
-            m[(p, f)] = 0.0;
-        }
-        m[(p, p)] = 1.0;
+        hold(m, p, n);
         rhs[p] = 0.0;
     }
     if !cholesky_solve(m, &mut rhs, n) {
@@ -281,6 +291,59 @@ fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q:
         }
     }
     rhs
+}
+
+/// Add the motors' armature to the diagonal of `m`; a row in `free` (the link side of a
+/// backlash gap) gets the gear's link-side inertia instead.
+#[inline]
+fn add_armature(model: &Model, pd: &ParamData, m: &mut MatN, free: &FreeMotors) {
+    for i in 0..model.nv {
+        m[(i, i)] += model.armature[i];
+    }
+    if *free != ALL_PRESCRIBED {
+        for (k, &p) in model.motor_idx.iter().enumerate() {
+            if free[k] {
+                m[(p, p)] += pd.params.effects.backlash.inertia[k] - model.armature[p];
+            }
+        }
+    }
+}
+
+/// Replace row and column `p` of the leading `n` block of `m` by the identity (a joint whose
+/// acceleration is given).
+#[inline]
+fn hold(m: &mut MatN, p: usize, n: usize) {
+    for f in 0..n {
+        m[(f, p)] = 0.0;
+        m[(p, f)] = 0.0;
+    }
+    m[(p, p)] = 1.0;
+}
+
+/// Velocity change of every joint per unit generalised impulse on joint `row` at `q`, with
+/// the motor rows not in `free` and the locked joints held (their velocity does not jump):
+/// `A⁻¹ e_row` [rad/s per N·m·s]. A plastic impact that sets joint `row`'s velocity jump to
+/// Δ applies `Δ / r[row]` times this response `r`.
+pub fn impulse_response(model: &Model, pd: &ParamData, q: &VecN, free: &FreeMotors, row: usize) -> VecN {
+    let n = model.nv;
+    let rot = model.rotations(q);
+    let mut m = MatN::zeros();
+    crba_into(model, &pd.body, &rot, &mut m);
+    add_armature(model, pd, &mut m, free);
+    for (k, &p) in model.motor_idx.iter().enumerate() {
+        if !free[k] {
+            hold(&mut m, p, n);
+        }
+    }
+    for &p in model.locked() {
+        hold(&mut m, p, n);
+    }
+    let mut r = VecN::zeros();
+    r[row] = 1.0;
+    if !cholesky_solve(&mut m, &mut r, n) {
+        r.fill(f64::NAN);
+    }
+    r
 }
 
 /// Root bending moments carried by the locked joints of rigid links at (q, q̇) with the
@@ -303,13 +366,16 @@ pub fn locked_moments(model: &Model, pd: &ParamData, rot: &[Mat3; crate::math::N
 }
 
 /// [`locked_moments`] at time `t` for the state (q, q̇) under `drive` (prescribed here for
-/// replay): one forward-dynamics evaluation, only when the model has rigid links.
+/// replay, with the gears' modes under `backlash`): one forward-dynamics evaluation, only
+/// when the model has rigid links.
 pub fn locked_moments_at(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN) -> VecN {
     if model.nlocked == 0 {
         return VecN::zeros();
     }
     let (mut q, mut v) = (*q, *v);
-    let am = prescribe(model, drive, t, &mut q, &mut v);
-    let qdd = accel(model, pd, drive, t, &q, &v, am, 0.0);
+    let mut m = MatN::zeros();
+    let g = if crate::backlash::active(pd, drive) { crate::backlash::modes(model, pd, drive, t, &q, &v, &mut m) } else { crate::backlash::RIGID };
+    let am = crate::backlash::prescribe(model, drive, &g, t, &mut q, &mut v);
+    let qdd = accel_free(model, pd, drive, t, &q, &v, am, 0.0, &mut m, &g.free);
     locked_moments(model, pd, &model.rotations(&q), &v, &qdd)
 }

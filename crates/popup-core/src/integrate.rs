@@ -5,7 +5,7 @@
 
 use crate::drive::Drive;
 use crate::dynamics::articulated::accel_articulated;
-use crate::forward::{accel_with, prescribe};
+use crate::forward::{accel_free, accel_with, prescribe};
 use crate::math::{MatN, VecN};
 use crate::model::{Integrator, Model};
 use crate::params::ParamData;
@@ -21,6 +21,11 @@ impl Workspace {
     /// A fresh (zeroed) workspace.
     pub fn new() -> Workspace {
         Workspace { m: MatN::zeros() }
+    }
+
+    /// The scratch matrix (zero outside the model's leading block between uses).
+    pub fn matrix(&mut self) -> &mut MatN {
+        &mut self.m
     }
 }
 
@@ -40,6 +45,9 @@ pub fn step(model: &Model, pd: &ParamData, drive: &Drive, t: f64, h: f64, q: &mu
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub fn step_with(model: &Model, pd: &ParamData, drive: &Drive, t: f64, h: f64, q: &mut VecN, v: &mut VecN, ws: &mut Workspace) {
+    if crate::backlash::active(pd, drive) {
+        return step_play(model, pd, drive, t, h, q, v, ws);
+    }
     match model.options.integrator {
         Integrator::Rk4 => rk4(model, pd, drive, t, h, q, v, ws),
         Integrator::SemiImplicit => semi_implicit(model, pd, drive, t, h, q, v, ws),
@@ -63,18 +71,80 @@ fn stage(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &mut VecN, v: 
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub fn rk4(model: &Model, pd: &ParamData, drive: &Drive, t: f64, h: f64, q: &mut VecN, v: &mut VecN, ws: &mut Workspace) {
+    rk4_stages(t, h, q, v, |t, q, v| stage(model, pd, drive, t, q, v, ws));
+    prescribe(model, drive, t + h, q, v);
+}
+
+/// The RK4 update with `stage(t, q, v)` = q̈ at (t, q, v) (it may overwrite the prescribed
+/// coordinates of q, v first).
+#[inline]
+fn rk4_stages<F: FnMut(f64, &mut VecN, &mut VecN) -> VecN>(t: f64, h: f64, q: &mut VecN, v: &mut VecN, mut stage: F) {
     let (q0, mut v1) = (*q, *v);
     let mut q1 = q0;
-    let a1 = stage(model, pd, drive, t, &mut q1, &mut v1, ws);
+    let a1 = stage(t, &mut q1, &mut v1);
     let (mut q2, mut v2) = (q1 + v1 * (0.5 * h), v1 + a1 * (0.5 * h));
-    let a2 = stage(model, pd, drive, t + 0.5 * h, &mut q2, &mut v2, ws);
+    let a2 = stage(t + 0.5 * h, &mut q2, &mut v2);
     let (mut q3, mut v3) = (q1 + v2 * (0.5 * h), v1 + a2 * (0.5 * h));
-    let a3 = stage(model, pd, drive, t + 0.5 * h, &mut q3, &mut v3, ws);
+    let a3 = stage(t + 0.5 * h, &mut q3, &mut v3);
     let (mut q4, mut v4) = (q1 + v3 * h, v1 + a3 * h);
-    let a4 = stage(model, pd, drive, t + h, &mut q4, &mut v4, ws);
+    let a4 = stage(t + h, &mut q4, &mut v4);
     *q = q1 + (v1 + (v2 + v3) * 2.0 + v4) * (h / 6.0);
     *v = v1 + (a1 + (a2 + a3) * 2.0 + a4) * (h / 6.0);
-    prescribe(model, drive, t + h, q, v);
+}
+
+/// One step with `backlash` in replay: the gears' modes are chosen from the state and held
+/// over a segment; when a free link side reaches a flank inside the segment, the segment is
+/// cut at the contact (located on the cubic Hermite of the play between the segment's
+/// ends), the link side hits the flank there and the rest of the step goes on with the new
+/// modes ([`crate::backlash`]). At most [`crate::backlash::MAX_CONTACTS_PER_STEP`] contacts
+/// are located per step; beyond that the link side is put on the flank at the step's end.
+#[allow(clippy::too_many_arguments)]
+fn step_play(model: &Model, pd: &ParamData, drive: &Drive, t: f64, h: f64, q: &mut VecN, v: &mut VecN, ws: &mut Workspace) {
+    use crate::backlash;
+    let (mut t0, mut left) = (t, h);
+    for event in 0..=backlash::MAX_CONTACTS_PER_STEP {
+        let g = backlash::modes(model, pd, drive, t0, q, v, &mut ws.m);
+        let (q0, v0) = (*q, *v);
+        segment(model, pd, drive, &g, t0, left, q, v, ws);
+        let cut = if event < backlash::MAX_CONTACTS_PER_STEP { backlash::first_contact(model, pd, drive, &g, t0, left, (&q0, &v0), (q, v)) } else { None };
+        match cut {
+            Some((s, k, side)) if s < left => {
+                (*q, *v) = (q0, v0);
+                segment(model, pd, drive, &g, t0, s, q, v, ws);
+                if let Drive::Replay(sp) = drive {
+                    let (qm, vm, _) = sp.eval(t0 + s);
+                    backlash::hit(model, pd, &g, k, side, (qm[k], vm[k]), true, q, v);
+                }
+                backlash::impacts(model, pd, drive, &g, t0 + s, q, v);
+                t0 += s;
+                left -= s;
+            }
+            _ => {
+                backlash::impacts(model, pd, drive, &g, t0 + left, q, v);
+                backlash::prescribe(model, drive, &g, t0 + left, q, v);
+                return;
+            }
+        }
+    }
+}
+
+/// Advance (q, q̇) from `t` by `h` with the gears' modes `g` held.
+#[allow(clippy::too_many_arguments)]
+fn segment(model: &Model, pd: &ParamData, drive: &Drive, g: &crate::backlash::Gears, t: f64, h: f64, q: &mut VecN, v: &mut VecN, ws: &mut Workspace) {
+    use crate::backlash;
+    match model.options.integrator {
+        Integrator::Rk4 => rk4_stages(t, h, q, v, |t, q, v| {
+            let am = backlash::prescribe(model, drive, g, t, q, v);
+            accel_free(model, pd, drive, t, q, v, am, 0.0, &mut ws.m, &g.free)
+        }),
+        Integrator::SemiImplicit => {
+            let am = backlash::prescribe(model, drive, g, t, q, v);
+            let a = accel_free(model, pd, drive, t, q, v, am, h, &mut ws.m, &g.free);
+            *v += a * h;
+            *q += *v * h;
+        }
+    }
+    backlash::prescribe(model, drive, g, t + h, q, v);
 }
 
 /// Semi-implicit Euler with implicit damping: `(M + hC) Δq̇ = h (τ − b − C q̇)`,

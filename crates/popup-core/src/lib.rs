@@ -33,6 +33,7 @@ pub mod sim;
 pub mod control;
 pub mod spec;
 pub mod statics;
+pub mod backlash;
 pub mod beam;
 pub mod stream;
 #[cfg(feature = "mcap")]

@@ -17,7 +17,7 @@
 
 use crate::drive::Drive;
 use crate::dynamics::{crba, forward_pass, rnea};
-use crate::forward::{locked_moments, solve_accel, spring_moments};
+use crate::forward::{locked_moments, solve_accel, spring_moments, FreeMotors, ALL_PRESCRIBED};
 use crate::kinematics::prbm::{frames_with, Frames};
 use crate::math::{dot_n, mat_vec_row, MatN, Vec3, VecN};
 use crate::model::Model;
@@ -162,26 +162,42 @@ fn energy_with(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, m: &Ma
 /// every channel.
 #[allow(clippy::too_many_arguments)]
 pub fn sample(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, row: &mut [f64]) {
+    sample_free(model, pd, drive, t, q, v, am, &ALL_PRESCRIBED, row)
+}
+
+/// [`sample`] with the motor rows in `free` inside their `backlash` gap (not prescribed;
+/// [`crate::backlash`]). Under backlash in replay the `q*`, `dq*` channels and the motors'
+/// friction read the motor side (the encoder), not the link side.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_free(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, am: Option<[f64; 3]>, free: &FreeMotors, row: &mut [f64]) {
     let rot = model.rotations(q);
     let m = crba(model, &pd.body, &rot);
     let b = rnea(model, &pd.body, &rot, v, &VecN::zeros(), &model.gravity);
-    let qdd = solve_accel(model, pd, drive, t, q, v, am, 0.0, &m, &b);
+    let qdd = solve_accel(model, pd, drive, t, q, v, am, 0.0, &m, &b, free);
     let bm = forward_pass(model, &rot, v, &qdd, &(-model.gravity));
     let fr = frames_with(model, &rot);
     let fx = &pd.params.effects;
     let drag = if fx.air_drag.cd > 0.0 { Some(crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, &rot, v)) } else { None };
     row[0] = t;
+    let motor = match drive {
+        Drive::Replay(s) if crate::backlash::active(pd, drive) => {
+            let (qm, vm, _) = s.eval(t);
+            Some((qm, vm))
+        }
+        _ => None,
+    };
     for k in 0..3 {
         let i = model.motor_idx[k];
-        row[1 + k] = q[i];
-        row[4 + k] = v[i];
+        let (qk, vk) = motor.map_or((q[i], v[i]), |(qm, vm)| (qm[k], vm[k]));
+        row[1 + k] = qk;
+        row[4 + k] = vk;
         // row i of M q̈ + b (minus external loads), plus the motoreducer's own friction
         let mut tau = mat_vec_row(&m, &qdd, i, model.nv) + b[i];
         if let Some(dr) = &drag {
             tau -= dr[i];
         }
         if fx.joint_friction.on() {
-            tau += crate::effects::friction_torque(&fx.joint_friction, k, v[i]);
+            tau += crate::effects::friction_torque(&fx.joint_friction, k, vk);
         }
         let lim = fx.actuator_saturation.tau_max[k];
         row[7 + k] = if lim.is_finite() { tau.clamp(-lim, lim) } else { tau };

@@ -2,17 +2,16 @@
 //! divergence detection, sampling of the sensor channels and the wrinkling alarm log.
 
 use crate::drive::{Drive, Spline3};
-use crate::effects::play;
 use crate::control::machine::Event;
 use crate::stream::{either, Collect, DelayLine, Flow, Sink, StateView, Stoppable};
 use crate::error::{Error, Result};
 use crate::limits::{check_steps, num, POLL_EVERY_STEPS};
-use crate::forward::{locked_moments_at, prescribe};
+use crate::forward::locked_moments_at;
 use crate::integrate::{step_with, Workspace};
 use crate::math::VecN;
 use crate::model::{Integrator, Model};
 use crate::params::ParamData;
-use crate::sensor::{bending_moments, sample, NCH};
+use crate::sensor::{bending_moments, sample_free, NCH};
 use crate::statics::{linear_eigs, static_equilibrium};
 
 /// Joint speed above which a run is declared unstable [rad/s].
@@ -121,7 +120,12 @@ pub fn check_initial(model: &Model, s: &State) -> Result<()> {
 /// # Errors
 /// [`Error::StepTooLarge`] naming the mode, its joint and the largest stable step.
 pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Result<()> {
-    let free = model.free_joints(replay);
+    let mut free = model.free_joints(replay);
+    if replay {
+        // the link side of a gear with play is free inside its gap (crate::backlash)
+        let gap = pd.params.effects.backlash.gap;
+        free.extend(model.motor_idx.iter().enumerate().filter(|&(k, _)| gap[k] != 0.0).map(|(_, &p)| p));
+    }
     let h = model.options.dt;
     let integ = model.options.integrator;
     let eigs = linear_eigs(model, pd, q, &free, integ == Integrator::Rk4);
@@ -320,11 +324,16 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
                 Drive::Replay(s) => s.eval(t0).0,
                 Drive::Torque(_) | Drive::Hold(_) => [0.0; 3],
             };
-            rest_state(model, pd, t0, qm)?
+            crate::backlash::rest(model, pd, t0, qm)?
         }
     };
     st.t = t0;
-    prescribe(model, &cfg.drive, t0, &mut st.q, &mut st.v);
+    let play = crate::backlash::active(pd, &cfg.drive);
+    let mut ws = Workspace::new();
+    // the gears' modes at a state (all rigid without backlash)
+    let gears = |st: &State, ws: &mut Workspace| if play { crate::backlash::modes(model, pd, &cfg.drive, st.t, &st.q, &st.v, ws.matrix()) } else { crate::backlash::RIGID };
+    let g0 = gears(&st, &mut ws);
+    crate::backlash::prescribe(model, &cfg.drive, &g0, t0, &mut st.q, &mut st.v);
     if cfg.check_step {
         check_step(model, pd, &st.q, cfg.drive.is_replay())?;
     }
@@ -338,8 +347,9 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
         let mut q = st.q;
         let mut v = st.v;
         let f = sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd, ratio })?;
-        let am = prescribe(model, &cfg.drive, st.t, &mut q, &mut v);
-        sample(model, pd, &cfg.drive, st.t, &q, &v, am, row);
+        let g = gears(st, &mut Workspace::new());
+        let am = crate::backlash::prescribe(model, &cfg.drive, &g, st.t, &mut q, &mut v);
+        sample_free(model, pd, &cfg.drive, st.t, &q, &v, am, &g.free, row);
         if let Some(enc) = &encoder {
             let (qe, ve, _) = enc.eval(st.t);
             row[1..4].copy_from_slice(&qe);
@@ -357,7 +367,6 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
     };
     let (f0, ratio) = track(&st, &mut alarms, sink)?;
     let mut flow = either(f0, write(&st, ratio, &mut row, sink)?);
-    let mut ws = Workspace::new();
     for k in 0..nstep {
         if k % POLL_EVERY_STEPS == POLL_EVERY_STEPS - 1 {
             flow = either(flow, sink.poll());
@@ -381,10 +390,10 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
     Ok(OpenEnd { nsample, alarms, final_state: st })
 }
 
-/// The drive the physics sees under `backlash` and an encoder `sensor_delay` in replay:
-/// the link side follows the play operator of the true motor angle, and the true motor
+/// The drive the physics sees under an encoder `sensor_delay` in replay: the true motor
 /// angle leads the encoder by the delay (`q_m(t) = q_enc(t + delay)`). Returns the drive
-/// and, when it differs from the encoder spline, the encoder spline for the q/dq channels.
+/// and, when the `q*`/`dq*` channels must not be read from the physics (a delay, or
+/// `backlash`, where the chain holds the link side), the encoder spline for them.
 fn effect_drive(model: &Model, pd: &ParamData, drive: &Drive) -> Result<(Drive, Option<Spline3>)> {
     let fx = &pd.params.effects;
     let gap = fx.backlash.gap;
@@ -395,13 +404,17 @@ fn effect_drive(model: &Model, pd: &ParamData, drive: &Drive) -> Result<(Drive, 
             format!("{gap:?}"),
             "backlash needs encoder replay in this version (torque drive has no motor-side state until the motoreducer model of the controller issue)",
         )),
-        Drive::Replay(s) if gap != [0.0; 3] || delay != 0.0 => {
-            let _ = model;
+        Drive::Replay(_) if gap != [0.0; 3] && model.has_beam() => Err(Error::param(
+            "effects.backlash.gap",
+            format!("{gap:?}"),
+            "backlash is not available with beam links in this version (the articulated-body solver has no free motor rows): use PRBM links",
+        )),
+        Drive::Replay(s) if delay != 0.0 => {
             let (t, y) = s.knots();
-            let ts: Vec<f64> = if delay != 0.0 { t.iter().map(|&x| x - delay).collect() } else { t.to_vec() };
-            let yl = if gap != [0.0; 3] { play(y, &gap) } else { y.to_vec() };
-            Ok((Drive::Replay(Spline3::new(&ts, &yl)?), Some(s.clone())))
+            let ts: Vec<f64> = t.iter().map(|&x| x - delay).collect();
+            Ok((Drive::Replay(Spline3::new(&ts, y)?), Some(s.clone())))
         }
+        Drive::Replay(s) if gap != [0.0; 3] => Ok((drive.clone(), Some(s.clone()))),
         _ => Ok((drive.clone(), None)),
     }
 }

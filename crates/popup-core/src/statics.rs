@@ -159,7 +159,14 @@ pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with
     if n == 0 {
         return Vec::new();
     }
-    let mm = mass_matrix(model, pd, q);
+    let mut mm = mass_matrix(model, pd, q);
+    // a free motor row with play is the link side of its gear: the gear's link-side inertia
+    // replaces the motor's armature (crate::backlash)
+    for (k, &p) in model.motor_idx.iter().enumerate() {
+        if pd.params.effects.backlash.gap[k] != 0.0 && free.contains(&p) {
+            mm[(p, p)] += pd.params.effects.backlash.inertia[k] - model.armature[p];
+        }
+    }
     let kk = stiffness(model, pd, q);
     let cc = if with_damping { damping_matrix(model, pd) } else { MatN::zeros() };
     let m = DMatrix::from_fn(n, n, |i, j| mm[(free[i], free[j])]);
