@@ -129,6 +129,8 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
     "joint_friction": [{"name": "Stribeck", "extra": ["tau_s", "v_s"], "seeds": [{"tau_s": 0.5, "v_s": 0.05}, {"tau_s": 1.5, "v_s": 0.1}, {"tau_s": 1.0, "v_s": 0.02}]}],
     "higher_bending_modes": [{"name": "3 segments", "structure": {"segments": [3.0, 3.0]}}],
     "payload_mass": [{"name": "centre-of-mass offset", "extra": ["com_offset_m"]}],
+    # how fast a link side crosses its gap depends on the gear's link-side inertia
+    "backlash": [{"name": "fitted link-side inertia", "extra": ["inertia"], "seeds": [{"inertia": 0.003}, {"inertia": 0.03}, {"inertia": 0.1}, {"inertia": 0.3}]}],
     "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
                 {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
 }

@@ -71,6 +71,7 @@ PARAM_SCALE: Dict[Tuple[str, str], float] = {
     ("joint_friction", "tau_s"): 1.0,
     ("joint_friction", "v_s"): 0.05,
     ("backlash", "gap"): 1e-3,
+    ("backlash", "inertia"): 1.0,  # fitted as ln J (LOG_PARAMS)
     ("higher_bending_modes", "k_scale"): 0.5,
     ("higher_bending_modes", "e_pa"): 1e8,
     ("higher_bending_modes", "lambda_s"): 1e-4,
@@ -116,10 +117,13 @@ BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
     ("torsion", "k_t"): (5.0, 1.5e4),
     ("torsion", "c_t"): (0.0, 2.0),
     ("higher_bending_modes", "k_scale"): (0.1, 5.0),
+    # a gear's link side: from an output flange alone to a whole motoreducer's reflected
+    # inertia (below 1e-3 kg·m² its free mode needs a step far below a lab rate)
+    ("backlash", "inertia"): (1e-3, 1.0),
 }
 
 #: Positive parameters fitted as their logarithm (module docs).
-LOG_PARAMS = {("torsion", "k_t")}
+LOG_PARAMS = {("torsion", "k_t"), ("backlash", "inertia")}
 
 _NUDGE = 0.2
 
