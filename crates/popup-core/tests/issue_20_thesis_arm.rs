@@ -99,3 +99,39 @@ fn all_rigid_arm_without_payload_has_finite_modes() {
         }
     }
 }
+
+/// The packaged arm files are built-in arms: the one list of names ([`ArmSpec::BUILTIN`])
+/// is `popup-lab` and the packaged files, each loads under its own name, and
+/// [`ArmSpec::resolve`] gives the same arm by name as from the file's path; an unknown name
+/// is refused with every known name.
+#[test]
+fn packaged_arms_resolve_by_name_like_the_builtin() {
+    use popup_core::error::Error;
+    let packaged: Vec<&str> = ArmSpec::PACKAGED.iter().map(|(n, _)| *n).collect();
+    assert_eq!(ArmSpec::BUILTIN[0], "popup-lab");
+    assert_eq!(&ArmSpec::BUILTIN[1..], packaged.as_slice(), "BUILTIN must list exactly popup-lab and the packaged files");
+    assert!(packaged.contains(&"popup-lab-thesis"));
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("arms");
+    for name in ArmSpec::BUILTIN {
+        let (spec, file) = ArmSpec::resolve(name, std::path::Path::new("/nonexistent")).unwrap();
+        assert_eq!(spec.name, *name);
+        assert!(file.is_none());
+        assert_eq!(spec, ArmSpec::builtin(name).unwrap());
+        Model::compile(&spec, Options::default()).unwrap();
+        if let Some(text) = ArmSpec::packaged_source(name) {
+            // the compiled-in text is the file in the repository, and loads the same by path
+            assert_eq!(text, std::fs::read_to_string(dir.join(format!("{name}.toml"))).unwrap(), "{name}: rebuild after editing the file");
+            let (by_path, file) = ArmSpec::resolve(&format!("{name}.toml"), &dir).unwrap();
+            assert_eq!(by_path, spec);
+            assert_eq!(file, Some(dir.join(format!("{name}.toml"))));
+        }
+    }
+    assert!(ArmSpec::packaged_source("popup-lab").is_none());
+    match ArmSpec::resolve("no-such-arm", std::path::Path::new(".")).unwrap_err() {
+        e @ Error::UnknownArm { .. } => {
+            let m = e.to_string();
+            assert!(ArmSpec::BUILTIN.iter().all(|n| m.contains(n)) && m.contains("no-such-arm"), "{m}");
+        }
+        e => panic!("expected UnknownArm, got {e}"),
+    }
+}
