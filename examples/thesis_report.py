@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """Write ``docs/thesis.md``: the thesis's numbers, ours, the ratio, and the fitted number
 that explains each gap; plots under ``docs/img/``; the fitted arm file
-``python/popup/arms/popup-lab-thesis.toml``.
+``crates/popup-core/arms/popup-lab-thesis.toml`` (compiled into the core: when the fit
+changes it, the script stops and asks for a rebuild, so that nothing below runs on the old
+arm).
 
 Parts: the motoreducer fitted to Tables 8–9 and its reflected inertia to the rigid column
 of Tables 5–7 (``examples/thesis_drive.py``); the link's FRF of Tables 10–15 and the link
@@ -29,6 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import thesis_data as td  # noqa: E402
 import thesis_drive as tdr  # noqa: E402
+import thesis_fem as tf  # noqa: E402
 import thesis_link as tl  # noqa: E402
 
 import popup  # noqa: E402
@@ -36,7 +39,7 @@ import popup  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "thesis.md"
 IMG = ROOT / "docs" / "img"
-ARM = ROOT / "python" / "popup" / "arms" / "popup-lab-thesis.toml"
+ARM = ROOT / "crates" / "popup-core" / "arms" / "popup-lab-thesis.toml"
 LAB = {"j_m": 0.8, "c_u": 0.1014, "tau_max": 66.83, "omega_i": 6283.0}
 """popup-lab's motoreducer (docs/control.md)."""
 
@@ -136,33 +139,6 @@ def plot_drive(r: tdr.DriveReport, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
-
-
-# ----------------------------------------------------------------------------- beam (FEM column)
-def beam_model(e_pa: float, gravity: bool, preset: str = "thesis-1.2mm", lam: float = 3.896e-4) -> "popup.Model":
-    """Link 2 a beam of 4 elements on a rigid link 1 (popup-lab masses), material from
-    ``preset`` with E = ``e_pa`` and λ = ``lam``."""
-    return popup.Model("popup-lab", gravity=gravity).with_links("rigid", "beam(4)", preset=preset, e_pa=e_pa, lambda_s=lam)
-
-
-def fit_beam_e(preset: str = "thesis-1.2mm") -> Tuple[float, Tuple[float, float]]:
-    """E [Pa] of link 2 as a beam that puts its first resonance on the FEM column's
-    7.85 / 12.7 / 54.5 rad/s (Tables 13–15, gravity off), least squares in ln E with a
-    95 % interval."""
-    from scipy.optimize import least_squares
-    from scipy.stats import t as student
-
-    th = np.array([td.LINK_FRF[t]["fem"][2] for t in (13, 14, 15)])  # type: ignore[index]
-
-    def res(x: np.ndarray) -> np.ndarray:
-        H = tl.engine_frf(beam_model(float(np.exp(x[0])), False, preset))
-        return np.log([tl.extract(tl.W, H[i])[2] for i in range(3)] / th)
-
-    sol = least_squares(res, [np.log(15e6)], diff_step=1e-3)
-    s2 = 2 * sol.cost / 2
-    se = math.sqrt(s2 / float(sol.jac[:, 0] @ sol.jac[:, 0]))
-    q = student.ppf(0.975, 2)
-    return float(np.exp(sol.x[0])), (float(np.exp(sol.x[0] - q * se)), float(np.exp(sol.x[0] + q * se)))
 
 
 # ----------------------------------------------------------------------------- sections
@@ -311,34 +287,6 @@ def link_section(fit: tl.LinkFit, lab: Dict, ours: Dict, rigid: Dict, beam_e: Tu
         f"the gain falls below −3 dB between the two modes ({f3(beam_rows[13][0])} rad/s) where the thesis read 430.\n"
     )
     return L
-
-
-def engine_tables_5_7() -> Dict[Tuple[str, float, float], float]:
-    """Tables 5–7 on the engine: popup-lab-thesis with its drive, the one-link set-up of
-    ``examples/thesis_ch78.py`` (link 1 rigid and upright, base drives that cannot
-    saturate, link 2 horizontal), gravity on, stepped sines of the q3 velocity reference
-    (``popup.frequency.simulate``), cut-off = first −3 dB crossing; link 2 PRBM or rigid.
-    Returns {(link, payload [kg], amplitude [rad/s]): cut-off [rad/s]}."""
-    import thesis_ch78 as c78
-    from popup import frequency as fr
-
-    ctrl = c78._controller(td.CH7_VEL, td.CH7_POS, one_link=True)
-    ctrl.damping = False
-    out: Dict[Tuple[str, float, float], float] = {}
-    pays = [2.0, 1.0, 0.0]
-    for link in ("prbm", "rigid"):
-        m = popup.Model("popup-lab-thesis", dt=1e-4, gravity=True).with_links("rigid", link)
-        for a in td.AMPLITUDES:
-            tg = np.array([td.TABLES_5_7[p][link][a] for p in pays])
-            w = np.geomspace(tg.min() / 2.0, tg.max() * 3.0, 15)
-            # an all-rigid arm without payload fails the engine's step check (a NaN mode of its
-            # linearisation, q1 dominated): the rigid 0 kg runs carry 1 g instead
-            pk = [p if (p > 0 or link == "prbm") else 1e-3 for p in pays]
-            f = fr.simulate(m, w, input="velocity", joint="q3", outputs=["dq3"], amplitude=[a] * 3, payload_kg=pk, q_motor=c78.ONE_Q0, controller=ctrl)
-            g = np.abs(f.H[:, :, 0])
-            for b, p in enumerate(pays):
-                out[(link, p, a)] = tdr.first_crossing(w, g[b])
-    return out
 
 
 def engine_5_7_section(e: Dict[Tuple[str, float, float], float], r: tdr.DriveReport) -> List[str]:
@@ -573,7 +521,7 @@ def missing_section() -> List[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--no-arm", action="store_true", help="keep python/popup/arms/popup-lab-thesis.toml as it is")
+    ap.add_argument("--no-arm", action="store_true", help="keep crates/popup-core/arms/popup-lab-thesis.toml as it is")
     ap.add_argument("--cache", action="store_true", help="reuse out/thesis_drive.pkl (the drive fit, ≈ 4 min) if present")
     args = ap.parse_args()
     t0 = time.time()
@@ -589,7 +537,11 @@ def main() -> None:
         cache.write_bytes(pickle.dumps(dr))
     print("drive fit", dr.jm.drive, flush=True)
     if not args.no_arm:
-        write_arm(dr.jm.drive, lf.link)
+        text = write_arm(dr.jm.drive, lf.link)
+        if text != popup.Arm.packaged_source("popup-lab-thesis"):
+            # the arm is compiled into the core: the rest would run on the old numbers
+            print(f"{ARM} changed: rebuild the extension (maturin) and rerun with --cache", file=sys.stderr)
+            sys.exit(3)
     lab = tl.engine_rows(lambda g: popup.Model("popup-lab", gravity=g).with_links("rigid", "prbm"))
     ours = tl.engine_rows(lambda g: popup.Model("popup-lab-thesis", gravity=g).with_links("rigid", "prbm"))
     rigid = tl.engine_rows(lambda g: popup.Model("popup-lab", gravity=g).with_links("rigid", "rigid"))
@@ -604,7 +556,8 @@ def main() -> None:
         + (", the drive fit and chapters 7–8 reused from `out/` (`--cache`)" if args.cache else "") + "); "
         "the thesis's numbers are in `examples/thesis_data.py` (as printed, with their tables). Every gap is explained "
         "by a fitted number; the fitted arm ships as `popup.Model(\"popup-lab-thesis\")` "
-        "(`python/popup/arms/popup-lab-thesis.toml`, every number that differs from popup-lab listed there) with its "
+        "(`crates/popup-core/arms/popup-lab-thesis.toml`, compiled in; every number that differs from popup-lab listed there; "
+        "`popup statics --arm popup-lab-thesis` and scenario files take it by name too) with its "
         "drive `Controller(motor=popup.arm_motor(\"popup-lab-thesis\"))`. `popup-lab` itself stays the arm of "
         "reference-arm.md. Checked by `tests/test_thesis.py` (< 15 s): Tables 8–9 each within 15 % by the fitted drive, "
         "Tables 10–15's resonances (not sic) within 5 %, the 2 kg peaks within 1.5 dB and the 1–2 kg cut-offs within 12 % by "

@@ -154,10 +154,14 @@ def test_thesis_arm_differs_from_popup_lab_only_where_it_says():
     b = _flat(tomllib.loads(popup.Model("popup-lab-thesis").arm.to_toml()))
     diff = {k for k in set(a) | set(b) if a.get(k) != b.get(k)}
     assert diff == {"name", "motors.armature_kgm2", "links[1].stiffness_scale", "links[1].damping_scale", "bodies[6].parts[0].mass_kg"}
-    text = (pathlib.Path(popup.model.ARMS_DIR) / "popup-lab-thesis.toml").read_text()
+    text = popup.Arm.packaged_source("popup-lab-thesis")
     for word in ("armature", "stiffness_scale", "damping_scale", "outer piece"):
         assert word in text
     assert "popup-lab-thesis" in popup.arm_names()
+    # the compiled-in text is the repository's file (a stale build would test old numbers)
+    src = pathlib.Path(__file__).resolve().parents[1] / "crates" / "popup-core" / "arms" / "popup-lab-thesis.toml"
+    if src.is_file():
+        assert text == src.read_text(), "rebuild the extension after editing crates/popup-core/arms/popup-lab-thesis.toml"
 
 
 def test_damping_scale_scales_only_that_links_damping():
