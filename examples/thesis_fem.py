@@ -43,6 +43,12 @@ ARM = "popup-lab-thesis"
 LAMBDA = 3.896e-4
 """Rayleigh λ [s] of the beam: section 2.3's fit-1 value read as ·10⁻⁴ (docs/thesis.md)."""
 PRESET = "thesis-1.2mm"
+TOL_RES = 0.25
+"""Tolerance of the fitted beam's resonances against Tables 13–15's FEM column (relative):
+one E cannot place all three (docs/thesis.md)."""
+TOL_5_7 = 0.20
+"""Tolerance of the engine's FEM column of Tables 5–7 (2 kg) against the thesis's
+(relative): the PRBM column on the engine lies within −15 … +4 % of its own."""
 FEM_TABLES = (13, 14, 15)
 """Tables whose FEM resonances fix E: gravity off, 2 / 1 / 0 kg."""
 
