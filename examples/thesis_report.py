@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """Write ``docs/thesis.md``: the thesis's numbers, ours, the ratio, and the fitted number
 that explains each gap; plots under ``docs/img/``; the fitted arm file
-``python/popup/arms/popup-lab-thesis.toml``.
+``crates/popup-core/arms/popup-lab-thesis.toml`` (compiled into the core: when the fit
+changes it, the script stops and asks for a rebuild, so that nothing below runs on the old
+arm).
 
 Parts: the motoreducer fitted to Tables 8–9 and its reflected inertia to the rigid column
 of Tables 5–7 (``examples/thesis_drive.py``); the link's FRF of Tables 10–15 and the link
@@ -29,6 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import thesis_data as td  # noqa: E402
 import thesis_drive as tdr  # noqa: E402
+import thesis_fem as tf  # noqa: E402
 import thesis_link as tl  # noqa: E402
 
 import popup  # noqa: E402
@@ -36,7 +39,7 @@ import popup  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "thesis.md"
 IMG = ROOT / "docs" / "img"
-ARM = ROOT / "python" / "popup" / "arms" / "popup-lab-thesis.toml"
+ARM = ROOT / "crates" / "popup-core" / "arms" / "popup-lab-thesis.toml"
 LAB = {"j_m": 0.8, "c_u": 0.1014, "tau_max": 66.83, "omega_i": 6283.0}
 """popup-lab's motoreducer (docs/control.md)."""
 
@@ -114,6 +117,32 @@ def plot_link(link: tl.Link, lab_rows: Dict, fit_rows: Dict, beam_H: np.ndarray,
     plt.close(fig)
 
 
+def plot_5_7(e: Dict[Tuple[str, float, float], float], path: Path) -> None:
+    """Cut-off vs sine amplitude, Tables 5–7: the thesis's rigid, FEM and PRBM columns and
+    the engine's rigid, beam and PRBM links."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(1, 3, figsize=(10, 3.2), sharey=True)
+    amps = list(td.AMPLITUDES)
+    style = {"rigid": ("C3", "rigid"), "fem": ("C2", "FEM / beam"), "prbm": ("C0", "PRBM")}
+    for ax, p, tab in zip(axs, (2.0, 1.0, 0.0), (5, 6, 7)):
+        for k, (col, lab) in style.items():
+            ax.loglog(amps, [td.TABLES_5_7[p][k][a] for a in amps], "o", mfc="none", color=col, label=f"thesis {lab}")
+            ax.loglog(amps, [e[(k, p, a)] for a in amps], "s-" if k != "fem" else "^--", color=col, ms=4, lw=1, label=f"engine {lab}")
+        ax.loglog(amps, [td.TABLE8[a] for a in amps], ":", color="0.5", lw=1, label="thesis Table 8 (motor alone)")
+        ax.set_title(f"Table {tab}: {p:g} kg")
+        ax.set_xlabel("amplitude A [rad/s]")
+        ax.grid(True, which="both", lw=0.3)
+    axs[0].set_ylabel("cut-off [rad/s]")
+    axs[0].legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def plot_drive(r: tdr.DriveReport, path: Path) -> None:
     """Cut-off vs amplitude (Table 8) and vs Kp (Table 9): thesis and the fitted drive."""
     import matplotlib
@@ -136,33 +165,6 @@ def plot_drive(r: tdr.DriveReport, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
-
-
-# ----------------------------------------------------------------------------- beam (FEM column)
-def beam_model(e_pa: float, gravity: bool, preset: str = "thesis-1.2mm", lam: float = 3.896e-4) -> "popup.Model":
-    """Link 2 a beam of 4 elements on a rigid link 1 (popup-lab masses), material from
-    ``preset`` with E = ``e_pa`` and λ = ``lam``."""
-    return popup.Model("popup-lab", gravity=gravity).with_links("rigid", "beam(4)", preset=preset, e_pa=e_pa, lambda_s=lam)
-
-
-def fit_beam_e(preset: str = "thesis-1.2mm") -> Tuple[float, Tuple[float, float]]:
-    """E [Pa] of link 2 as a beam that puts its first resonance on the FEM column's
-    7.85 / 12.7 / 54.5 rad/s (Tables 13–15, gravity off), least squares in ln E with a
-    95 % interval."""
-    from scipy.optimize import least_squares
-    from scipy.stats import t as student
-
-    th = np.array([td.LINK_FRF[t]["fem"][2] for t in (13, 14, 15)])  # type: ignore[index]
-
-    def res(x: np.ndarray) -> np.ndarray:
-        H = tl.engine_frf(beam_model(float(np.exp(x[0])), False, preset))
-        return np.log([tl.extract(tl.W, H[i])[2] for i in range(3)] / th)
-
-    sol = least_squares(res, [np.log(15e6)], diff_step=1e-3)
-    s2 = 2 * sol.cost / 2
-    se = math.sqrt(s2 / float(sol.jac[:, 0] @ sol.jac[:, 0]))
-    q = student.ppf(0.975, 2)
-    return float(np.exp(sol.x[0])), (float(np.exp(sol.x[0] - q * se)), float(np.exp(sol.x[0] + q * se)))
 
 
 # ----------------------------------------------------------------------------- sections
@@ -290,8 +292,9 @@ def link_section(fit: tl.LinkFit, lab: Dict, ours: Dict, rigid: Dict, beam_e: Tu
         f"{100 * (ours[10][2] / ours[13][2] - 1):+.0f} % (Table 10 vs 13 above).\n"
     )
     e, (lo, hi) = beam_e
-    L.append("**FEM column** (two peaks, 7.8 / 12.5–12.7 / 54.5–55 rad/s): link 2 an Euler–Bernoulli beam (4 elements, "
-             "1.2 mm wall, λ = 3.896·10⁻⁴ s, popup-lab's masses):\n")
+    L.append("**FEM column** (two peaks, 7.8 / 12.5–12.7 / 54.5–55 rad/s): link 2 of `popup-lab-thesis` an Euler–Bernoulli "
+             f"beam (`examples/thesis_fem.py`: 4 elements, 1.2 mm wall, λ = 3.896·10⁻⁴ s, the arm's link-2 masses: outer tube "
+             f"{tl.TUBE_M * lk.s_m:.3g} kg), the same beam as in Tables 5–7 above:\n")
     L.append("| table | thesis res. [rad/s] | beam, thesis E 0.557 GPa | beam, E fitted | ratio | thesis peak / cut-off | beam, E fitted: peak / cut-off |")
     L.append("|---|---|---|---|---|---|---|")
     for t in (13, 14, 15):
@@ -304,87 +307,87 @@ def link_section(fit: tl.LinkFit, lab: Dict, ours: Dict, rigid: Dict, beam_e: Tu
     L.append("")
     L.append(
         f"The FEM resonances need **E = {e / 1e6:.3g} MPa** ({lo / 1e6:.3g}–{hi / 1e6:.3g}) at 1.2 mm, "
-        f"{557e6 / e:.0f} × below section 2.3's 0.557 GPa: the thesis's FEM link of chapter 6.2 was not the one of its "
-        "section 2.3 fit with popup-lab's masses (its beam was soft like its PRBM link, or its mass larger). The peaks and "
-        "cut-offs are not fitted: with λ = 3.896·10⁻⁴ s the beam's first mode has ζ = λω/2 ≈ 0.002 (a far sharper peak than "
+        f"{td.FEM_FIT['fit1']['e_pa'] / e:.0f} × below section 2.3's 0.557 GPa: the thesis's FEM link of chapter 6.2 was not the one of its "
+        "section 2.3 fit (its beam was soft like its PRBM link, or its mass larger); Tables 5–7's 2 kg FEM entry says the "
+        "same independently (above). One E cannot put all three resonances on the thesis's (ratios above): E scales them "
+        "together, their spacing is set by the tube's mass against the payload's (a tube-mass fit as for the PRBM link "
+        "would close it; the PRBM fit's tube is kept so that one arm serves both link models). The peaks and "
+        f"cut-offs are not fitted: with λ = 3.896·10⁻⁴ s the beam's first mode has ζ = λω/2 ≈ {tf.LAMBDA * beam_rows[13][2] / 2:.3f} (a far sharper peak than "
         f"the thesis's 13.5–24 dB); with 1 and 0 kg the cut-off lies above 1000 rad/s as the thesis's '> 1000'; with 2 kg "
         f"the gain falls below −3 dB between the two modes ({f3(beam_rows[13][0])} rad/s) where the thesis read 430.\n"
     )
     return L
 
 
-def engine_tables_5_7() -> Dict[Tuple[str, float, float], float]:
-    """Tables 5–7 on the engine: popup-lab-thesis with its drive, the one-link set-up of
-    ``examples/thesis_ch78.py`` (link 1 rigid and upright, base drives that cannot
-    saturate, link 2 horizontal), gravity on, stepped sines of the q3 velocity reference
-    (``popup.frequency.simulate``), cut-off = first −3 dB crossing; link 2 PRBM or rigid.
-    Returns {(link, payload [kg], amplitude [rad/s]): cut-off [rad/s]}."""
-    import thesis_ch78 as c78
-    from popup import frequency as fr
-
-    ctrl = c78._controller(td.CH7_VEL, td.CH7_POS, one_link=True)
-    ctrl.damping = False
-    out: Dict[Tuple[str, float, float], float] = {}
-    pays = [2.0, 1.0, 0.0]
-    for link in ("prbm", "rigid"):
-        m = popup.Model("popup-lab-thesis", dt=1e-4, gravity=True).with_links("rigid", link)
-        for a in td.AMPLITUDES:
-            tg = np.array([td.TABLES_5_7[p][link][a] for p in pays])
-            w = np.geomspace(tg.min() / 2.0, tg.max() * 3.0, 15)
-            # an all-rigid arm without payload fails the engine's step check (a NaN mode of its
-            # linearisation, q1 dominated): the rigid 0 kg runs carry 1 g instead
-            pk = [p if (p > 0 or link == "prbm") else 1e-3 for p in pays]
-            f = fr.simulate(m, w, input="velocity", joint="q3", outputs=["dq3"], amplitude=[a] * 3, payload_kg=pk, q_motor=c78.ONE_Q0, controller=ctrl)
-            g = np.abs(f.H[:, :, 0])
-            for b, p in enumerate(pays):
-                out[(link, p, a)] = tdr.first_crossing(w, g[b])
-    return out
-
-
-def engine_5_7_section(e: Dict[Tuple[str, float, float], float], r: tdr.DriveReport) -> List[str]:
-    L = ["**Tables 5–7 on the engine** (`popup-lab-thesis` with its drive, one link, gravity on; stepped sines of the "
-         "non-linear closed loop, `popup.frequency.simulate`):\n"]
-    L.append("| kg | A [rad/s] | thesis PRBM | engine PRBM | ratio | thesis rigid | engine rigid | ratio | numpy drive model, rigid |")
-    L.append("|---|---|---|---|---|---|---|---|---|")
+def engine_5_7_section(e: Dict[Tuple[str, float, float], float], r: tdr.DriveReport, beam_e: Tuple[float, Tuple[float, float]], printed: Dict[float, float], printed_res: float) -> List[str]:
+    """Tables 5–7 on the engine (``thesis_fem.engine_tables_5_7``): the rigid, FEM (beam)
+    and PRBM columns side by side with the thesis's."""
+    ef, (elo, ehi) = beam_e
+    L = ["**Tables 5–7 on the engine** (`examples/thesis_fem.py`: `popup-lab-thesis` with its drive, one link, gravity on; "
+         "stepped sines of the non-linear closed loop, `popup.frequency.simulate`). Link 2 rigid, an Euler–Bernoulli beam "
+         f"(the FEM column: 4 elements, 1.2 mm wall, λ = 3.896·10⁻⁴ s, **E = {ef / 1e6:.3g} MPa**, the E that puts the beam's "
+         "first resonance on Tables 13–15's FEM column, below; not fitted to these tables) or PRBM (the fitted link):\n"]
+    L.append("| kg | A [rad/s] | thesis rigid | engine rigid | ratio | numpy drive model, rigid | thesis FEM | engine beam | ratio | thesis PRBM | engine PRBM | ratio |")
+    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
     sur = {c.name: o for c, o in zip(r.jm.cases, r.jm.ours)}
     tabs = {2.0: 5, 1.0: 6, 0.0: 7}
     for p in (2.0, 1.0, 0.0):
         for a in td.AMPLITUDES:
-            tp, tr_ = td.TABLES_5_7[p]["prbm"][a], td.TABLES_5_7[p]["rigid"][a]
-            ep, er = e[("prbm", p, a)], e[("rigid", p, a)]
-            L.append(f"| {p:g} | {a:g} | {tp:g} | {ep:.3g} | {ep / tp:.2f} | {tr_:g} | {er:.3g} | {er / tr_:.2f} | {sur.get(f'T{tabs[p]} rigid A={a:g}', math.nan):.3g} |")
-    rat = [e[("prbm", p, a)] / td.TABLES_5_7[p]["prbm"][a] for p in (2.0, 1.0, 0.0) for a in td.AMPLITUDES]
+            tr_, tf_, tp = (td.TABLES_5_7[p][k][a] for k in ("rigid", "fem", "prbm"))
+            er, ef_, ep = (e[(k, p, a)] for k in ("rigid", "fem", "prbm"))
+            L.append(
+                f"| {p:g} | {a:g} | {tr_:g} | {er:.3g} | {er / tr_:.2f} | {sur.get(f'T{tabs[p]} rigid A={a:g}', math.nan):.3g} | "
+                f"{tf_:g} | {ef_:.3g} | {ef_ / tf_:.2f} | {tp:g} | {ep:.3g} | {ep / tp:.2f} |"
+            )
+    rat = {k: [e[(k, p, a)] / td.TABLES_5_7[p][k][a] for p in (2.0, 1.0, 0.0) for a in td.AMPLITUDES] for k in ("fem", "prbm")}
+    rng = {k: f"{100 * (min(v) - 1):+.0f} … {100 * (max(v) - 1):+.0f} %" for k, v in rat.items()}
     L.append("")
     L.append(
-        f"The PRBM column is reproduced by the fitted arm within {100 * (min(rat) - 1):+.0f} … {100 * (max(rat) - 1):+.0f} % without "
-        "being fitted to it (the drive was fitted to Tables 8–9 and the rigid column, the link to Tables 10–15): the "
-        "decoupling argument above, on the engine. The rigid column on the engine agrees with the numpy drive model "
-        "(last column; the same load: link 2 with the fitted tube and the payload about the elbow, gravity), which checks "
-        "the fit's machinery; the rest is the engine's whole chain (the upright link 1 and the base drives react). The rigid "
-        "0 kg rows carry 1 g: with both links rigid and no payload the engine's step check finds a NaN mode (q1 dominated) "
-        "and refuses the run, an engine defect still to fix.\n"
+        f"The FEM column is reproduced by the beam link within {rng['fem']} and the PRBM column by the PRBM link within "
+        f"{rng['prbm']}, neither fitted to these tables (the drive was fitted to Tables 8–9 and the rigid column, the links "
+        "to Tables 10–15): the decoupling argument above, on the engine. Both flexible links have their first mode below "
+        "the cut-offs, so above it the motor sees J_m alone and both columns equal the motoreducer alone (Table 8: 49.1 / "
+        "151.5 / 707); the two columns of the thesis agree within 9 % for the same reason, and ours agree with each other "
+        "as closely. The rigid column on the engine agrees with the numpy drive model (the same load: link 2 with the "
+        "fitted tube and the payload about the elbow, gravity), which checks the fit's machinery; the rest is the engine's "
+        "whole chain (the upright link 1 and the base drives react). All rows run with the thesis's payloads, 0 kg "
+        "included (an all-rigid arm without payload used to fail the step check with a NaN mode: nalgebra's eigenvalue "
+        "routine read the free q1 rotation's double zero eigenvalue as a complex pair, √(−ε); fixed in the core, "
+        "`popup_core::math::eigenvalues`).\n"
     )
+    if printed:
+        L.append(
+            "**Which E the FEM column needs.** With section 2.3's printed E = 0.557 GPa (λ read as ·10⁻⁴ s) the beam's "
+            f"first resonance with 2 kg is {printed_res:.3g} rad/s (Table 13's FEM resonance: 7.85), and the 2 kg cut-off is "
+            + ", ".join(f"{c:.3g} rad/s at A = {a:g} rad/s" for a, c in printed.items())
+            + " (dt = 1e-4/12 s, the step that beam needs)"
+            + f" against the thesis's FEM {td.TABLES_5_7[2.0]['fem'][3.0]:g} and rigid {td.TABLES_5_7[2.0]['rigid'][3.0]:g}: "
+            "a link that stiff still loads the motor at the torque-limited cut-off. The FEM column, like the FEM link FRF, "
+            f"asks for the soft beam (E = {ef / 1e6:.3g} MPa, 95 %: {elo / 1e6:.3g}–{ehi / 1e6:.3g}), not section 2.3's.\n"
+        )
     return L
 
 
-def beam_fit_section(e_fit: float) -> List[str]:
+def beam_fit_section(e_fit: float, link: tl.Link) -> List[str]:
     """Section 2.3 with the thesis's numbers: static tip deflection and the relaxation time
-    the printed λ gives, side by side with ours."""
-    r, L = 0.055, 0.57
+    the printed λ gives, side by side with ours (``link``: the fitted PRBM link)."""
+    r, L = tl.R2, tl.TUBE_L
     g = 9.81
+    f1, f2 = td.FEM_FIT["fit1"], td.FEM_FIT["fit2"]
+    e_of_k = lambda k, t: k * L / (3 * math.pi * r**3 * t)  # noqa: E731  EI = kL/3
     rows = []
-    for label, e, t, lam, m in (
-        ("thesis fit 1", 0.55741e9, 1.2e-3, 3.896e4, 1.0),
-        ("thesis fit 1, λ read as 3.896·10⁻⁴ s", 0.55741e9, 1.2e-3, 3.896e-4, 1.0),
-        ("thesis fit 2", 794.9e6, 0.8e-3, 3.4919e4, 2.0),
-        ("thesis fit 2, λ read as 3.4919·10⁻⁴ s", 794.9e6, 0.8e-3, 3.4919e-4, 2.0),
-        ("ours, EI = kL/3 matched to popup-lab's k = 360 (λ = c/k)", 360.0 * L / (3 * math.pi * r**3 * 1.2e-3), 1.2e-3, 0.463 / 360.0, 2.0),
-        ("ours, EI = kL/3 matched to the fitted thesis link, k = 41 (λ = c/k)", 41.0 * L / (3 * math.pi * r**3 * 1.2e-3), 1.2e-3, 0.52 / 41.0, 2.0),
-        ("ours, fitted to Tables 13–15's FEM resonances", e_fit, 1.2e-3, 3.896e-4, 2.0),
+    for label, e, t, lam, m, tube in (
+        ("thesis fit 1", f1["e_pa"], f1["wall_m"], f1["lambda_s"], f1["payload_kg"], tl.TUBE_M),
+        ("thesis fit 1, λ read as 3.896·10⁻⁴ s", f1["e_pa"], f1["wall_m"], f1["lambda_s"] * 1e-8, f1["payload_kg"], tl.TUBE_M),
+        ("thesis fit 2", f2["e_pa"], f2["wall_m"], f2["lambda_s"], f2["payload_kg"], tl.TUBE_M),
+        ("thesis fit 2, λ read as 3.4919·10⁻⁴ s", f2["e_pa"], f2["wall_m"], f2["lambda_s"] * 1e-8, f2["payload_kg"], tl.TUBE_M),
+        (f"ours, EI = kL/3 matched to popup-lab's k = {tl.K_T3:g} (λ = c/k)", e_of_k(tl.K_T3, 1.2e-3), 1.2e-3, tl.C_T3 / tl.K_T3, 2.0, tl.TUBE_M),
+        (f"ours, EI = kL/3 matched to the fitted thesis link, k = {link.k:.3g} (λ = c/k)", e_of_k(link.k, 1.2e-3), 1.2e-3, link.c / link.k, 2.0, tl.TUBE_M * link.s_m),
+        ("ours, fitted to Tables 13–15's FEM resonances (popup-lab-thesis's tube)", e_fit, 1.2e-3, tf.LAMBDA, 2.0, tl.TUBE_M * link.s_m),
     ):
         EI = e * math.pi * r**3 * t
         defl = m * g * L**3 / (3 * EI)
-        w1 = math.sqrt(3 * EI / L**3 / (m + 0.24 * 0.38))
+        w1 = math.sqrt(3 * EI / L**3 / (m + 0.24 * tube))
         zeta = lam * w1 / 2
         relax = lam if zeta > 1 else float("nan")
         rows.append((label, e, t, lam, m, EI, defl, w1, zeta, relax))
@@ -393,19 +396,22 @@ def beam_fit_section(e_fit: float) -> List[str]:
     out.append("|---|---|---|---|---|---|---|---|---|---|")
     for (lab, e, t, lam, m, EI, d, w1, z, rx) in rows:
         out.append(f"| {lab} | {e / 1e6:.4g} | {t * 1e3:g} | {lam:.4g} | {m:g} | {EI:.3g} | {d * 1e3:.3g} | {w1:.3g} | {z:.3g} | {'—' if math.isnan(rx) else f'{rx:.3g}'} |")
-    k_lab = 360.0
+    k_lab = tl.K_T3
+    ei1, ei2 = rows[0][5], rows[2][5]
+    ei = 0.5 * (ei1 + ei2)
     out.append("")
     out.append(
-        "Cantilever of popup-lab's link 2 (r = 0.055 m, L = 0.57 m, I = π r³ t), tip load under gravity; ω₁ with a "
+        "Cantilever of link 2 (r = 0.055 m, L = 0.57 m, I = π r³ t), tip load under gravity; ω₁ with a "
         "quarter of the tube's mass at the tip. As printed, λ ≈ 3.9·10⁴ s makes every mode overdamped with a slow time "
         "constant ≈ λ ≈ 11 h: in a seconds-long estimation run the beam hardly moves, so the printed E cannot have been "
         "identified from a tip displacement (the 'steady-state error remains' of fit 1); read as ·10⁻⁴ s (the presets "
         f"`thesis-1.2mm`/`thesis-0.8mm` do) the first mode is lightly damped (ζ₁ = {rows[1][8]:.3f} and {rows[3][8]:.3f} on this cantilever). Both printed fits agree on E·t "
-        f"(6.7·10⁵ and 6.4·10⁵ N/m), i.e. EI ≈ 349 N·m², a static tip stiffness 3EI/L³ = {3 * 349 / L**3:.0f} N/m: "
-        f"{3 * 349 / L / k_lab:.1f} × popup-lab's PRBM (k/L² = {k_lab / L**2:.0f} N/m at the tip, k = 360) and "
-        f"{3 * 349 / L / 41:.0f} × the thesis's own chapter-6 PRBM link fitted above (k ≈ 41). Our fit of a beam to popup-lab's "
+        f"({f1['e_pa'] * f1['wall_m']:.2g} and {f2['e_pa'] * f2['wall_m']:.2g} N/m), i.e. EI ≈ {ei:.0f} N·m², a static tip stiffness 3EI/L³ = {3 * ei / L**3:.0f} N/m: "
+        f"{3 * ei / L / k_lab:.1f} × popup-lab's PRBM (k/L² = {k_lab / L**2:.0f} N/m at the tip, k = {k_lab:g}) and "
+        f"{3 * ei / L / link.k:.0f} × the thesis's own chapter-6 PRBM link fitted above (k ≈ {link.k:.3g}). Our fit of a beam to popup-lab's "
         "PRBM tip response (docs/beam_vs_prbm.md) lands within 3 % of the matched EI = kL/3 row; the thesis's chapter-6 FEM "
-        "resonances ask for an E between the k = 41 match and 1.5 × it, 30–45 × below the printed fits.\n"
+        f"resonances ask for E = {e_fit / 1e6:.3g} MPa, {e_fit / e_of_k(link.k, 1.2e-3):.2f} × the k = {link.k:.3g} match and "
+        f"{f1['e_pa'] / e_fit:.0f} × below the printed fit 1.\n"
     )
     return out
 
@@ -564,16 +570,14 @@ def ch78_section(res: Dict[str, Any], dr: tdr.DriveReport) -> List[str]:
 
 def missing_section() -> List[str]:
     return [
-        "## Not reproduced here yet\n",
-        "- Chapter 3 (set-membership identification): docs/setmembership.md.\n",
-        "- Tables 5–7's FEM column on the engine (beam link with the fitted drive): the PRBM column stands for it (the "
-        "thesis's FEM and PRBM columns agree within 9 %).\n",
+        "## Elsewhere\n",
+        "- Chapter 3 (set-membership identification): docs/setmembership.md (`examples/thesis_set_membership.py`).\n",
     ]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--no-arm", action="store_true", help="keep python/popup/arms/popup-lab-thesis.toml as it is")
+    ap.add_argument("--no-arm", action="store_true", help="keep crates/popup-core/arms/popup-lab-thesis.toml as it is")
     ap.add_argument("--cache", action="store_true", help="reuse out/thesis_drive.pkl (the drive fit, ≈ 4 min) if present")
     args = ap.parse_args()
     t0 = time.time()
@@ -589,33 +593,46 @@ def main() -> None:
         cache.write_bytes(pickle.dumps(dr))
     print("drive fit", dr.jm.drive, flush=True)
     if not args.no_arm:
-        write_arm(dr.jm.drive, lf.link)
+        text = write_arm(dr.jm.drive, lf.link)
+        if text != popup.Arm.packaged_source("popup-lab-thesis"):
+            # the arm is compiled into the core: the rest would run on the old numbers
+            print(f"{ARM} changed: rebuild the extension (maturin) and rerun with --cache", file=sys.stderr)
+            sys.exit(3)
     lab = tl.engine_rows(lambda g: popup.Model("popup-lab", gravity=g).with_links("rigid", "prbm"))
     ours = tl.engine_rows(lambda g: popup.Model("popup-lab-thesis", gravity=g).with_links("rigid", "prbm"))
     rigid = tl.engine_rows(lambda g: popup.Model("popup-lab", gravity=g).with_links("rigid", "rigid"))
-    be = fit_beam_e()
-    beam_rows = tl.engine_rows(lambda g: beam_model(be[0], g))
-    thesis_beam_rows = tl.engine_rows(lambda g: beam_model(0.55741e9, g))
-    plot_link(lf.link, lab, ours, tl.engine_frf(beam_model(be[0], False)), IMG / "thesis_link_frf.png")
+    be = tf.fit_beam_e()
+    print("beam E", be, flush=True)
+    beam_rows = tl.engine_rows(lambda g: tf.beam_model(be[0], g))
+    thesis_beam_rows = tl.engine_rows(lambda g: tf.beam_model(td.FEM_FIT["fit1"]["e_pa"], g))
+    plot_link(lf.link, lab, ours, tl.engine_frf(tf.beam_model(be[0], False)), IMG / "thesis_link_frf.png")
     plot_drive(dr, IMG / "thesis_drive.png")
+    t57 = tf.engine_tables_5_7({"rigid": tf.one_link_model("rigid"), "fem": tf.one_link_model("beam", be[0]), "prbm": tf.one_link_model("prbm")})
+    # section 2.3's printed E on the most telling entry (2 kg, A = 3 rad/s); that stiff beam needs dt = 1e-4/12 s
+    printed = {3.0: float(tf.engine_cutoffs(tf.one_link_model("beam", td.FEM_FIT["fit1"]["e_pa"], dt=1e-4 / 12), 3.0, [2.0], np.geomspace(10.0, 150.0, 9))[0])}
+    print("tables 5-7", t57, printed, flush=True)
+    plot_5_7(t57, IMG / "thesis_tables_5_7.png")
     L = [
         "# The thesis's results, reproduced\n",
         f"Generated by `examples/thesis_report.py` (popup {popup.__version__}, @SECONDS@ s on 2 shared cores"
         + (", the drive fit and chapters 7–8 reused from `out/` (`--cache`)" if args.cache else "") + "); "
         "the thesis's numbers are in `examples/thesis_data.py` (as printed, with their tables). Every gap is explained "
         "by a fitted number; the fitted arm ships as `popup.Model(\"popup-lab-thesis\")` "
-        "(`python/popup/arms/popup-lab-thesis.toml`, every number that differs from popup-lab listed there) with its "
+        "(`crates/popup-core/arms/popup-lab-thesis.toml`, compiled in; every number that differs from popup-lab listed there; "
+        "`popup statics --arm popup-lab-thesis` and scenario files take it by name too) with its "
         "drive `Controller(motor=popup.arm_motor(\"popup-lab-thesis\"))`. `popup-lab` itself stays the arm of "
-        "reference-arm.md. Checked by `tests/test_thesis.py` (< 15 s): Tables 8–9 each within 15 % by the fitted drive, "
+        "reference-arm.md. Checked by `tests/test_thesis.py` (≈ 1 min): Tables 8–9 each within 15 % by the fitted drive, "
         "Tables 10–15's resonances (not sic) within 5 %, the 2 kg peaks within 1.5 dB and the 1–2 kg cut-offs within 12 % by "
-        "the fitted arm on the engine, and the models' physics against closed forms.\n",
+        f"the fitted arm on the engine, Tables 13–15's FEM resonances within {100 * tf.TOL_RES:.0f} % and Tables 5–7's 2 kg FEM column within "
+        f"{100 * tf.TOL_5_7:.0f} % by the beam link with E refitted, the rigid 0 kg run, and the models' physics against closed forms.\n",
         "![Tables 8 and 9](img/thesis_drive.png)\n",
     ]
     L += drive_section(dr)
-    L += engine_5_7_section(engine_tables_5_7(), dr)
+    L += engine_5_7_section(t57, dr, be, printed, thesis_beam_rows[13][2])
+    L += ["![Tables 5-7](img/thesis_tables_5_7.png)\n"]
     L += ["![Tables 10-15](img/thesis_link_frf.png)\n"]
     L += link_section(lf, lab, ours, rigid, be, beam_rows, thesis_beam_rows)
-    L += beam_fit_section(be[0])
+    L += beam_fit_section(be[0], lf.link)
     L += ch5_section()
     ch = ROOT / "out" / "thesis_ch78.pkl"
     if args.cache and ch.exists():

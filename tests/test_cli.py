@@ -245,3 +245,56 @@ def test_sweep_parquet_without_pyarrow_is_a_clear_error(tmp_path, monkeypatch, c
     err = capsys.readouterr().err
     assert code == 2 and ran == []
     assert "--parquet needs pyarrow" in err and "pip install pyarrow" in err and "Traceback" not in err, err
+
+
+def test_packaged_arms_by_name(popup_cmd, tmp_path):
+    """Packaged arm files resolve by name in every command as in ``popup.Model(name)``: one
+    list (``popup.arm_names()``, the core's), one resolution. The Rust commands take it as
+    ``--arm`` (``statics``), ``popup arm NAME`` and a scenario's ``arm`` key (``check``,
+    ``run``); ``popup diagnose`` reads it from a measured run's ``experiment.toml``. The
+    CLI's holding torques equal the Python model's (the same arm), and an unknown name is
+    refused naming every known one."""
+    import numpy as np
+
+    names = popup.arm_names()
+    assert names[0] == "popup-lab" and "popup-lab-thesis" in names
+    q = (0.0, 1.5707963, -1.5707963)
+    r = run(popup_cmd, "statics", "--arm", "popup-lab-thesis", "--q", ",".join(map(str, q)))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("arm popup-lab-thesis payload 2 kg"), r.stdout
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("holding torques"))
+    tau_cli = np.array([float(x) for x in line.split(":", 1)[1].strip(" []").split(",")])
+    m = popup.Model("popup-lab-thesis")
+    np.testing.assert_allclose(tau_cli, m.holding_torque(q), rtol=1e-9, atol=1e-9)
+    assert not np.allclose(tau_cli, popup.Model("popup-lab").holding_torque(q), rtol=1e-3)
+    r = run(popup_cmd, "arm", "popup-lab-thesis")
+    assert r.returncode == 0, r.stderr
+    assert popup.Arm.from_toml(r.stdout).to_toml() == m.arm.to_toml()
+
+    for args in (("statics", "--arm", "no-such-arm"), ("arm", "no-such-arm")):
+        r = run(popup_cmd, *args)
+        assert r.returncode == 2
+        assert "no-such-arm" in r.stderr and all(n in r.stderr for n in names), r.stderr
+    with pytest.raises(popup.UnknownArmError) as e:
+        popup.Model("no-such-arm")
+    assert all(n in str(e.value) for n in names)
+
+    body = 'format = "popup-scenario/1"\narm = "{}"\nq0 = [0.0, 0.6, -0.4]\nduration_s = 0.1\ndt = 5e-4\nsample_rate_hz = 100.0\n[controller]\nrate_hz = 2000.0\n'
+    sc = tmp_path / "s.toml"
+    sc.write_text(body.format("popup-lab-thesis"))
+    r = run(popup_cmd, "check", str(sc))
+    assert r.returncode == 0, r.stderr
+    assert "arm popup-lab-thesis" in r.stdout, r.stdout
+    r = run(popup_cmd, "run", str(sc), "--out", str(tmp_path / "r.mcap"))
+    assert r.returncode == 0, r.stderr
+    sc.write_text(body.format("no-such-arm"))
+    r = run(popup_cmd, "check", str(sc))
+    assert r.returncode == 2 and all(n in r.stderr for n in names), r.stderr
+
+    # a measured run of the packaged arm names it in experiment.toml; diagnose reads it
+    q0 = (0.0, 0.6, -0.4)
+    res = m.simulate(m.holding_torque(q0), duration=0.2, initial_q=m.rest_state(q0), sample_rate=100.0)
+    df = popup.io.from_sim(res)
+    assert df.attrs["experiment"]["arm"] == "popup-lab-thesis"
+    popup.io.write_run(tmp_path / "run", df.attrs["experiment"], df)
+    assert popup.io.read_run(tmp_path / "run").model().arm.to_toml() == m.arm.to_toml()

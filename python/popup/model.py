@@ -52,15 +52,13 @@ def _report(errors: Sequence[Optional[Tuple[str, str]]], warns: Sequence[Sequenc
                 _warnings.warn(w, PopupWarning, stacklevel=4)
 
 
-ARMS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "arms")
-"""Packaged arm files (``<name>.toml``, each ``base = "popup-lab"`` plus its overrides),
-loadable by name: ``popup.Model("popup-lab-thesis")`` (docs/thesis.md)."""
-
-
 def arm_names() -> List[str]:
-    """Names :func:`load_arm` knows: the core's built-ins and the packaged arm files."""
-    extra = sorted(f[:-5] for f in os.listdir(ARMS_DIR) if f.endswith(".toml")) if os.path.isdir(ARMS_DIR) else []
-    return list(_core.Arm.builtin_names()) + extra
+    """Names :func:`load_arm` (and ``popup.Model(name)``, the CLI's ``--arm``, scenario and
+    measured-run ``arm`` keys) know: ``popup-lab`` and the arm files packaged with the core
+    (``crates/popup-core/arms/<name>.toml``, e.g. ``popup-lab-thesis``, docs/thesis.md).
+    The list is the core's (``popup_core::spec::ArmSpec::BUILTIN``): one resolution for
+    every front end."""
+    return list(_core.Arm.builtin_names())
 
 
 def arm_motor(name: str) -> Dict[str, float]:
@@ -72,31 +70,28 @@ def arm_motor(name: str) -> Dict[str, float]:
     fitted together with its drives carries them as these comments.
 
     Raises :class:`InputError` for a name that is not a packaged arm file."""
-    path = os.path.join(ARMS_DIR, name + ".toml")
-    if not os.path.isfile(path):
-        raise InputError(f"input name: {name!r} is not a packaged arm file; known: {', '.join(arm_names())}")
+    text = _core.Arm.packaged_source(name)
+    if text is None:
+        packaged = [n for n in arm_names() if _core.Arm.packaged_source(n) is not None]
+        raise InputError(f"input name: {name!r} is not a packaged arm file; packaged: {', '.join(packaged)} (all arms: {', '.join(arm_names())})")
     out: Dict[str, float] = {}
-    with open(path, encoding="utf-8") as f:
-        for line in f:
-            t = line.strip()
-            if t.startswith("# motor.") and "=" in t:
-                k, v = t[len("# motor.") :].split("=", 1)
-                out[k.strip()] = float(v.split()[0])
+    for line in text.splitlines():
+        t = line.strip()
+        if t.startswith("# motor.") and "=" in t:
+            k, v = t[len("# motor.") :].split("=", 1)
+            out[k.strip()] = float(v.split()[0])
     return out
 
 
 def load_arm(arm: ArmLike) -> "_core.Arm":
-    """An :class:`Arm` from an Arm, a built-in name (``"popup-lab"``), the name of a
-    packaged arm file (:func:`arm_names`, e.g. ``"popup-lab-thesis"``) or a path to a TOML
-    arm file."""
+    """An :class:`Arm` from an Arm, a built-in name (:func:`arm_names`: ``"popup-lab"``,
+    ``"popup-lab-thesis"``, ...) or a path to a TOML arm file. An unknown name raises
+    :class:`UnknownArmError` listing the known ones."""
     if isinstance(arm, _core.Arm):
         return arm
     s = os.fspath(arm)
     if s in _core.Arm.builtin_names():
         return _core.Arm.builtin(s)
-    packaged = os.path.join(ARMS_DIR, s + ".toml")
-    if os.sep not in s and "/" not in s and os.path.isfile(packaged):
-        return _core.Arm.load(packaged)
     if s.endswith(".toml") or os.path.exists(s):
         return _core.Arm.load(s)
     return _core.Arm.builtin(s)  # raises UnknownArmError naming the built-ins

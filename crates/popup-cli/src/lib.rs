@@ -40,7 +40,8 @@ struct Cli {
 
 #[derive(clap::Args, Clone)]
 struct ArmArgs {
-    /// Built-in arm name or path to a TOML arm file.
+    /// Arm: a built-in name (`popup info` lists them, packaged arm files such as
+    /// `popup-lab-thesis` included) or the path of a TOML arm file.
     #[arg(long, default_value = "popup-lab")]
     arm: String,
     /// Payload [kg] (default: the arm's).
@@ -111,7 +112,7 @@ enum Cmd {
     },
     /// Print the complete TOML of an arm (built-in name or file), e.g. to start an arm file.
     Arm {
-        /// Built-in name or path.
+        /// Built-in name (`popup info` lists them) or path of an arm file.
         #[arg(default_value = "popup-lab")]
         arm: String,
     },
@@ -146,15 +147,11 @@ enum Cmd {
     },
 }
 
+/// The arm of `--arm` / `popup arm NAME`: a built-in or packaged arm by name, else an arm
+/// file (relative to the working directory): [`ArmSpec::resolve`], as for scenario files
+/// and `popup.Model(name)`.
 fn load_arm(name: &str) -> popup_core::Result<ArmSpec> {
-    if ArmSpec::BUILTIN.contains(&name) {
-        return ArmSpec::builtin(name);
-    }
-    match std::fs::read_to_string(name) {
-        Ok(text) => ArmSpec::from_toml(&text, name),
-        Err(e) if std::path::Path::new(name).exists() => Err(popup_core::Error::ArmFile { source_name: name.into(), message: e.to_string() }),
-        Err(_) => ArmSpec::builtin(name),
-    }
+    ArmSpec::resolve(name, Path::new("")).map(|(a, _)| a)
 }
 
 fn params(spec: &ArmSpec, a: &ArmArgs) -> popup_core::Result<Params> {

@@ -108,3 +108,39 @@ fn binary_check_lists_problems_and_run_refuses_bad_scenarios() {
     assert!(mcap::Summary::read(&std::fs::read(&out).unwrap()).unwrap().is_some());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Packaged arm files are taken by name wherever an arm is named, as `popup.Model(name)`
+/// does (one resolution, `ArmSpec::resolve`): `--arm`, `popup arm NAME` and the `arm` key
+/// of a scenario (`check`, `run`); an unknown name is refused with the known names.
+#[test]
+fn packaged_arms_by_name() {
+    let o = bin(&["arm", "popup-lab-thesis"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("name = \"popup-lab-thesis\""), "{text}");
+    assert_eq!(popup_core::spec::ArmSpec::from_toml(&text, "printed").unwrap(), popup_core::spec::ArmSpec::builtin("popup-lab-thesis").unwrap());
+    let o = bin(&["statics", "--arm", "popup-lab-thesis", "--q", "0,1.5707963,-1.5707963"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).starts_with("arm popup-lab-thesis payload 2 kg"));
+    let o = bin(&["statics", "--arm", "no-such-arm"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    for name in popup_core::spec::ArmSpec::BUILTIN {
+        assert!(err.contains(name), "{name} missing from: {err}");
+    }
+    let dir = std::env::temp_dir().join(format!("popup-cli-packaged-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let sc = scenario(&dir, &format!("arm = \"popup-lab-thesis\"\n{HOLD}"));
+    let o = bin(&["check", sc.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("arm popup-lab-thesis"));
+    let out = dir.join("r.mcap");
+    let o = bin(&["run", sc.to_str().unwrap(), "--out", out.to_str().unwrap(), "--duration", "0.2"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let bad = scenario(&dir, &format!("arm = \"no-such-arm\"\n{HOLD}"));
+    let o = bin(&["check", bad.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("arm") && err.contains("popup-lab-thesis"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

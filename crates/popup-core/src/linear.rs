@@ -105,7 +105,7 @@ pub struct LinearModel {
 impl LinearModel {
     /// Eigenvalues of A (the poles) [1/s], sorted by |λ| then imaginary part.
     pub fn poles(&self) -> Vec<Complex<f64>> {
-        let mut ev: Vec<Complex<f64>> = self.a.clone().complex_eigenvalues().iter().copied().collect();
+        let mut ev: Vec<Complex<f64>> = crate::math::eigenvalues(self.a.clone());
         ev.sort_by(|x, y| x.norm().partial_cmp(&y.norm()).unwrap_or(std::cmp::Ordering::Equal).then(x.im.partial_cmp(&y.im).unwrap_or(std::cmp::Ordering::Equal)));
         ev
     }

@@ -164,9 +164,97 @@ fn chol_dyn(a: &mut MatN, b: &mut VecN, n: usize) -> bool {
     true
 }
 
+/// Eigenvalues of a real square matrix, from its real Schur form `A = Q T Qᵀ`.
+///
+/// Use this, not nalgebra 0.35's `complex_eigenvalues`: that one reads every 2×2 block
+/// left on T's diagonal as a complex pair and takes `√(−discriminant)`, which is NaN when
+/// the block's eigenvalues are real. Such a block is left whenever the QR iteration cannot
+/// split a (nearly) defective real pair, e.g. the double zero eigenvalue of a motor joint
+/// with no stiffness and no damping (an all-rigid arm without payload has one at q1: the
+/// free rotation about the vertical axis, `[[0, 1], [ε, 0]]` with ε at rounding level).
+/// Here a block with discriminant ≥ 0 gives its two real eigenvalues `tr/2 ± √disc`.
+/// Non-finite entries of `a` give NaN eigenvalues (the Schur iteration is not run).
+pub fn eigenvalues(a: nalgebra::DMatrix<f64>) -> Vec<nalgebra::Complex<f64>> {
+    use nalgebra::Complex;
+    let n = a.nrows();
+    assert_eq!(n, a.ncols(), "eigenvalues of a non-square matrix");
+    if n == 0 {
+        return Vec::new();
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return vec![Complex::new(f64::NAN, f64::NAN); n];
+    }
+    let (_, t) = nalgebra::linalg::Schur::new(a).unpack();
+    let mut out = Vec::with_capacity(n);
+    let mut m = 0;
+    while m < n {
+        if m + 1 == n || t[(m + 1, m)] == 0.0 {
+            out.push(Complex::new(t[(m, m)], 0.0));
+            m += 1;
+            continue;
+        }
+        // 2×2 block [[p, q], [r, s]]: λ = (p + s)/2 ± √(((p − s)/2)² + q r)
+        let (p, q, r, s) = (t[(m, m)], t[(m, m + 1)], t[(m + 1, m)], t[(m + 1, m + 1)]);
+        let half_tr = 0.5 * (p + s);
+        let half_diff = 0.5 * (p - s);
+        let disc = half_diff * half_diff + q * r;
+        if disc >= 0.0 {
+            let d = disc.sqrt();
+            out.push(Complex::new(half_tr + d, 0.0));
+            out.push(Complex::new(half_tr - d, 0.0));
+        } else {
+            let d = (-disc).sqrt();
+            out.push(Complex::new(half_tr, d));
+            out.push(Complex::new(half_tr, -d));
+        }
+        m += 2;
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn eigenvalues_of_real_2x2_blocks_are_real_not_nan() {
+        use nalgebra::DMatrix;
+        // a nilpotent-like block with a rounding-level lower entry: the eigenvalues are ±√ε
+        for eps in [0.0, 1e-300, 1e-27, 1e-12] {
+            let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, eps, 0.0]);
+            let ev = eigenvalues(a);
+            let mut re: Vec<f64> = ev.iter().map(|z| z.re).collect();
+            re.sort_by(f64::total_cmp);
+            assert!(ev.iter().all(|z| z.re.is_finite() && z.im == 0.0), "eps {eps}: {ev:?}");
+            assert!((re[1] - eps.sqrt()).abs() <= 1e-15 && (re[0] + eps.sqrt()).abs() <= 1e-15, "eps {eps}: {ev:?}");
+        }
+        // a damped oscillator ẍ + 2ζω ẋ + ω² x = 0: λ = −ζω ± iω√(1 − ζ²)
+        let (w, z) = (7.85_f64, 0.05_f64);
+        let ev = eigenvalues(DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -w * w, -2.0 * z * w]));
+        for l in &ev {
+            assert!((l.re + z * w).abs() < 1e-12 && (l.im.abs() - w * (1.0 - z * z).sqrt()).abs() < 1e-12, "{ev:?}");
+        }
+        // random matrices: the same eigenvalues as the characteristic polynomial's check
+        // det(A − λI) ≈ 0, and the sum equals the trace
+        let mut s: u64 = 99;
+        let mut r = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for n in [3usize, 6, 9] {
+            let a = DMatrix::from_fn(n, n, |_, _| r());
+            let ev = eigenvalues(a.clone());
+            let tr: f64 = ev.iter().map(|z| z.re).sum();
+            assert!((tr - a.trace()).abs() < 1e-10 && ev.iter().map(|z| z.im).sum::<f64>().abs() < 1e-10);
+            for l in &ev {
+                let ac = a.map(|v| nalgebra::Complex::new(v, 0.0)) - DMatrix::identity(n, n) * *l;
+                assert!(ac.determinant().norm() < 1e-9, "n {n}: λ = {l}");
+            }
+        }
+        assert!(eigenvalues(DMatrix::from_element(2, 2, f64::NAN)).iter().all(|z| z.re.is_nan()));
+    }
 
     #[test]
     fn kernels_match_nalgebra_bits_for_7x7() {

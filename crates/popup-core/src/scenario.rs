@@ -235,17 +235,15 @@ fn read_head(doc: &Doc<'_>, out: &mut Vec<Problem>) -> Head {
     }
 }
 
-/// The arm named `name`: a built-in arm, or an arm file relative to `base_dir`.
+/// The arm named `name`: a built-in (or packaged) arm, or an arm file relative to
+/// `base_dir` ([`ArmSpec::resolve`], the one resolution of every front end).
 fn load_arm(name: &str, base_dir: &Path) -> std::result::Result<(ArmSpec, Option<PathBuf>), String> {
-    if ArmSpec::BUILTIN.contains(&name) {
-        return ArmSpec::builtin(name).map(|a| (a, None)).map_err(|e| e.to_string());
-    }
-    let path = base_dir.join(name);
-    if !path.is_file() {
-        return Err(format!("{name:?} is neither a built-in arm ({}) nor an arm file (no file {})", ArmSpec::BUILTIN.join(", "), path.display()));
-    }
-    let text = std::fs::read_to_string(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    ArmSpec::from_toml(&text, &path.display().to_string()).map(|a| (a, Some(path))).map_err(|e| e.to_string())
+    ArmSpec::resolve(name, base_dir).map_err(|e| match e {
+        crate::Error::UnknownArm { .. } => {
+            format!("{name:?} is neither a built-in arm ({}) nor an arm file (no file {})", ArmSpec::BUILTIN.join(", "), base_dir.join(name).display())
+        }
+        e => e.to_string(),
+    })
 }
 
 /// An array of numbers, or one number for all `n` elements.

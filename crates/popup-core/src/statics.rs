@@ -179,7 +179,7 @@ pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with
     }
     a.view_mut((n, 0), (n, n)).copy_from(&(-&mi * &k));
     a.view_mut((n, n), (n, n)).copy_from(&(-&mi * &c));
-    let eig = a.clone().complex_eigenvalues();
+    let eig = crate::math::eigenvalues(a.clone());
     let mut out = Vec::with_capacity(2 * n);
     for lam in eig.iter() {
         // name the joint whose own k_ii/m_ii is nearest |λ|²: a cheap estimate of where the

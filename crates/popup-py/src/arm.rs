@@ -78,10 +78,18 @@ impl PyArm {
         Ok(PyArm { spec: ArmSpec::builtin(name).py()? })
     }
 
-    /// Names of the built-in arms.
+    /// Names of the built-in arms (`popup-lab` and the packaged arm files, e.g.
+    /// `popup-lab-thesis`): the one list every front end resolves names against.
     #[staticmethod]
     fn builtin_names() -> Vec<String> {
         ArmSpec::BUILTIN.iter().map(|s| s.to_string()).collect()
+    }
+
+    /// The text (with its comments) of the packaged arm file `name`; `None` for an arm that
+    /// is not a packaged file (`popup-lab` is built in code).
+    #[staticmethod]
+    fn packaged_source(name: &str) -> Option<&'static str> {
+        ArmSpec::packaged_source(name)
     }
 
     /// Parse an arm file's text; `source` names it in error messages.

@@ -270,18 +270,58 @@ fn body(name: &str, link: usize, parts: Vec<PartSpec>) -> BodySpec {
 }
 
 impl ArmSpec {
-    /// Names of the built-in arms.
-    pub const BUILTIN: &'static [&'static str] = &["popup-lab"];
+    /// Names of the built-in arms: `popup-lab` (built in code, [`ArmSpec::popup_lab`]) and
+    /// the packaged arm files of [`ArmSpec::PACKAGED`], in that order. Every front end
+    /// (the CLI's `--arm` and scenario `arm` keys, `popup.Model(name)`, measured-run and
+    /// sweep files) resolves a name through [`ArmSpec::builtin`], so this is the one list.
+    pub const BUILTIN: &'static [&'static str] = &["popup-lab", "popup-lab-thesis"];
 
-    /// A built-in arm by name.
+    /// Arm files packaged with the core (`crates/popup-core/arms/<name>.toml`, compiled in):
+    /// name → the file's text, each `base = "popup-lab"` plus its overrides, with comments
+    /// giving the reason for every number that differs. `popup-lab-thesis`: the numbers the
+    /// thesis's Simscape model must have had (docs/thesis.md, written by
+    /// `examples/thesis_report.py`).
+    pub const PACKAGED: &'static [(&'static str, &'static str)] = &[("popup-lab-thesis", include_str!("../../arms/popup-lab-thesis.toml"))];
+
+    /// A built-in arm by name: `popup-lab` or a packaged arm file ([`ArmSpec::PACKAGED`]).
     ///
     /// # Errors
-    /// [`crate::Error::UnknownArm`] for a name not in [`ArmSpec::BUILTIN`].
+    /// [`crate::Error::UnknownArm`] for a name not in [`ArmSpec::BUILTIN`], listing them.
     pub fn builtin(name: &str) -> crate::Result<Self> {
-        match name {
-            "popup-lab" => Ok(Self::popup_lab()),
-            _ => Err(crate::Error::UnknownArm { name: name.into(), known: Self::BUILTIN.join(", ") }),
+        if name == "popup-lab" {
+            return Ok(Self::popup_lab());
         }
+        match Self::packaged_source(name) {
+            Some(text) => Self::from_toml(text, &format!("packaged arm file {name}.toml")),
+            None => Err(crate::Error::UnknownArm { name: name.into(), known: Self::BUILTIN.join(", ") }),
+        }
+    }
+
+    /// The arm `name` as every front end resolves it: a built-in arm ([`ArmSpec::BUILTIN`],
+    /// packaged arm files included) by its name, else the arm file at `name`, relative to
+    /// `base_dir` (the CLI's working directory, a scenario's folder). Returns the arm and
+    /// the file's path (`None` for a built-in arm).
+    ///
+    /// # Errors
+    /// [`crate::Error::UnknownArm`] (listing the built-in names) when `name` is neither a
+    /// built-in arm nor an existing file; [`crate::Error::ArmFile`] for a file that cannot be
+    /// read or parsed.
+    pub fn resolve(name: &str, base_dir: &std::path::Path) -> crate::Result<(Self, Option<std::path::PathBuf>)> {
+        if Self::BUILTIN.contains(&name) {
+            return Ok((Self::builtin(name)?, None));
+        }
+        let path = base_dir.join(name);
+        match std::fs::read_to_string(&path) {
+            Ok(text) => Self::from_toml(&text, &path.display().to_string()).map(|a| (a, Some(path))),
+            Err(e) if path.exists() => Err(crate::Error::ArmFile { source_name: path.display().to_string(), message: format!("cannot read: {e}") }),
+            Err(_) => Err(crate::Error::UnknownArm { name: name.into(), known: format!("{} (and no arm file {})", Self::BUILTIN.join(", "), path.display()) }),
+        }
+    }
+
+    /// The text of the packaged arm file `name` (with its comments), `None` for an arm that
+    /// is not a packaged file (`popup-lab` is built in code; `popup arm popup-lab` prints it).
+    pub fn packaged_source(name: &str) -> Option<&'static str> {
+        Self::PACKAGED.iter().find(|(n, _)| *n == name).map(|(_, t)| *t)
     }
 
     /// The POP-UP laboratory prototype exactly as `reference-arm.md` gives it.
