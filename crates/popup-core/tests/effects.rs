@@ -71,7 +71,8 @@ fn flat_vector_round_trips_and_bounds_are_enforced() {
         off += ps.len;
     }
     let mut w = Effects::default().to_flat();
-    w[popup_core::effects::offset(5)] = 1.5; // higher_bending_modes.segments[0]
+    let seg = PARAMS.iter().position(|p| (p.effect, p.name) == ("higher_bending_modes", "segments")).unwrap();
+    w[popup_core::effects::offset(seg)] = 1.5; // higher_bending_modes.segments[0]
     assert!(Effects::from_flat(&w).unwrap_err().to_string().contains("whole number"));
 }
 
@@ -85,6 +86,8 @@ fn neutral_values_are_bit_identical_to_nominal() {
     fx.joint_friction.v_s = [0.3, 0.2, 0.1];
     fx.torsion.c_t = [0.0, 0.0];
     fx.higher_bending_modes.k_scale = [1.0, 1.0];
+    fx.backlash.inertia = [0.5, 0.2, 0.1];
+    fx.backlash.restitution = [0.3; 3];
     for name in popup_core::effects::EFFECT_NAMES {
         assert!(fx.is_neutral(name), "{name}");
     }
@@ -325,12 +328,6 @@ fn air_drag_dissipates_and_scales_with_speed_squared() {
     assert!((f2 - f1 * 4.0).norm() < 1e-12 * f1.norm().max(1e-300));
     assert!(f1.dot(&v) < 0.0, "drag power must be negative");
     assert!((drag_forces(&m, &pts[..n], 2.0, &rot, &v) - f1 * 2.0).norm() < 1e-12);
-}
-
-fn replay_once(m: &Model, t: &[f64], y: &[[f64; 3]]) -> Trajectory {
-    let pd = ParamData::new(m, &Params { payload_kg: 1.0, pressure_pa: [30e3; 2], effects: Effects::default() }).unwrap();
-    let cfg = RunConfig { drive: Drive::Replay(Spline3::new(t, y).unwrap()), initial: None, duration: None, sample_period: 2e-3, check_step: true };
-    run(m, &pd, &cfg).unwrap()
 }
 
 #[test]
