@@ -38,8 +38,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     }
     m.add("BEAM_PRESETS", presets)?;
     // the one registry of bounds and measured-data plausibility limits (popup_core::limits)
-    let lim: Vec<(Vec<&str>, &str, f64, f64, f64, &str)> =
-        popup_core::limits::CHANNEL_LIMITS.iter().map(|l| (l.columns.to_vec(), l.unit, l.min, l.warn_abs, l.error_abs, l.advice)).collect();
+    // (columns, unit, min, warn, error, scale, advice): warn/error in the unit when scale
+    // is "", else factors of the arm's number (`Arm.channel_limits()` gives the numbers)
+    let lim: Vec<(Vec<&str>, &str, f64, f64, f64, &str, &str)> =
+        popup_core::limits::CHANNEL_LIMITS.iter().map(|l| (l.columns.to_vec(), l.unit, l.min, l.warn, l.error, l.scale.name(), l.advice)).collect();
     m.add("CHANNEL_LIMITS", lim)?;
     m.add("GAP_WARN_STEPS", popup_core::limits::GAP_WARN_STEPS)?;
     m.add("GAP_ERROR_STEPS", popup_core::limits::GAP_ERROR_STEPS)?;
