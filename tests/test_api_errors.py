@@ -48,6 +48,12 @@ def test_complex_torque_is_refused_not_silently_made_real():
         m.simulate(np.array([0.0, 1j, 0.0]), duration=0.01)
 
 
+@pytest.mark.parametrize("kw", [{"check_step": np.zeros(0)}, {"check_step": "no"}, {"raise_on_error": [True, False]}])
+def test_flags_of_the_wrong_kind_are_named(kw):
+    with pytest.raises(popup.InputError, match="input " + next(iter(kw))):
+        popup.Model().rollout(duration=0.01, **kw)
+
+
 def test_a_sample_rate_that_does_not_divide_the_physics_rate_is_named():
     with pytest.raises(popup.InputError, match=r"sample_rate.*1\.5 Hz must divide the physics rate 1000\.0 Hz"):
         popup.Model().simulate(duration=0.01, sample_rate=1.5)

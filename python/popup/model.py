@@ -690,13 +690,13 @@ class Model:
             None if replay else float(duration),  # type: ignore[arg-type]
             1.0 / float(sample_rate),
             _threads(threads),
-            bool(check_step),
+            _flag("check_step", check_step),
             fx_b,
             None if log is None else os.fspath(log),
             log_exp,
         )
         err_msgs: List[Optional[str]] = [None if e is None else e[1] for e in errors]
-        _report(errors, warns, raise_on_error)
+        _report(errors, warns, _flag("raise_on_error", raise_on_error))
         params = self.describe()
         params.update(
             {
@@ -818,10 +818,10 @@ class Model:
             np.ascontiguousarray(g_b),
             fx_b,
             _threads(threads),
-            bool(check_step),
+            _flag("check_step", check_step),
             "<task>",
         )
-        _report(errors, warns, raise_on_error)
+        _report(errors, warns, _flag("raise_on_error", raise_on_error))
         params = self.describe()
         params.update({"payload_kg": pay_b, "pressure_pa": pres_b, "q0": q0_b, "task": text, "sample_rate_hz": float(sample_rate), "seed": None})
         names = [p.name or p.kind.capitalize() for p in task.phases]
