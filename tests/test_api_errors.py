@@ -77,6 +77,7 @@ def run(tmp_path_factory):
         ({"sample_rate": [500.0]}, "input sample_rate"),
         ({"sample_rate": "x"}, "input sample_rate"),
         ({"sample_rate": 1.5}, "sample_rate"),
+        ({"n_windows": 4_267_948_480_560_694}, "input n_windows: 4267948480560694 windows for a run of 26 samples; at most 26 "),
     ],
 )
 def test_compare_arguments_are_named(run, kw, needle):

@@ -333,6 +333,10 @@ class Comparison:
 # ---------------------------------------------------------------------------- compare
 
 
+#: Most windows :func:`compare` reports (each costs a pass over the samples).
+_MAX_WINDOWS = 1000
+
+
 def compare(
     model: "Model",
     run: MeasuredRun,
@@ -378,6 +382,11 @@ def compare(
     for name, val in (("lags", lags), ("n_windows", n_windows)):
         if isinstance(val, (bool, np.bool_)) or not isinstance(val, (int, np.integer)) or val < 1:
             raise InputError(f"compare: input {name}: expected an integer ≥ 1, got {val!r}")
+    if n_windows > min(len(run), _MAX_WINDOWS):  # bounded work: a window needs a sample; each costs a pass
+        raise InputError(
+            f"compare: input n_windows: {n_windows} windows for a run of {len(run)} samples; at most "
+            f"{min(len(run), _MAX_WINDOWS)} (one sample per window, and at most {_MAX_WINDOWS} rows in the window table)"
+        )
     if channels is not None:
         channels = _names("channels", channels)
     if sample_rate is not None:
