@@ -54,6 +54,15 @@ def test_flags_of_the_wrong_kind_are_named(kw):
         popup.Model().rollout(duration=0.01, **kw)
 
 
+def test_an_absurd_encoder_angle_is_named_not_blamed_on_the_statics():
+    # found by tests/test_fuzz_runs.py: 1e300 rad in one encoder cell ended as "static
+    # equilibrium did not converge ... the springs may be too weak for the load"
+    t = [0.0, 2.246687641658144e-211, 1.0]
+    q = [[0.0, 0.0, 0.0], [0.0, 0.0, 1e300], [0.0, 0.0, 0.0]]
+    with pytest.raises(popup.InputError, match=r"encoder replay angles: value at row 1, column 2 \(q3\) is 1e300 rad, beyond 25\.13"):
+        popup.Model().replay(t, q, sample_rate=100)
+
+
 def test_a_sample_rate_that_does_not_divide_the_physics_rate_is_named():
     with pytest.raises(popup.InputError, match=r"sample_rate.*1\.5 Hz must divide the physics rate 1000\.0 Hz"):
         popup.Model().simulate(duration=0.01, sample_rate=1.5)
