@@ -68,6 +68,7 @@ def write_arm(drive: tdr.Drive, link: tl.Link) -> str:
 #                          Tables 10-15's resonances 7.85 / 11 / 54.5 rad/s and 2 kg peak
 #   link 2 outer piece     {m_tube:.4g} kg (popup-lab 0.38 kg; same 0.57 m tube), so its inertia
 #                          about the bending joint is {link.inertia(0.0)[0]:.4g} kg*m^2 (popup-lab 0.0417)
+#   motors.tau_max_nm      {drive.tau_max:.4g} N*m per drive (popup-lab 66.83): the fitted motoreducer's limit
 # Link 1 and everything else as popup-lab. The controller's motoreducer fitted to Tables 8-9
 # (not part of the arm description; popup.arm_motor("popup-lab-thesis") reads these lines):
 # motor.torque_per_unit = {drive.c_u:.5g}
@@ -80,6 +81,7 @@ bodies = [{{}}, {{}}, {{}}, {{}}, {{}}, {{}}, {{ parts = [{{ mass_kg = {m_tube:.
 
 [motors]
 armature_kgm2 = [{drive.j_m:.5g}, {drive.j_m:.5g}, {drive.j_m:.5g}]
+tau_max_nm = [{drive.tau_max:.5g}, {drive.tau_max:.5g}, {drive.tau_max:.5g}]
 """
     ARM.write_text(text)
     return text

@@ -8,5 +8,5 @@ CASES="${1:-20000}"
 echo "== Rust (proptest): ${CASES} cases per target"
 PROPTEST_CASES="$CASES" cargo test --release -p popup-core --test issue_19_fuzz -- --nocapture 2>&1 | tail -n 12
 echo "== Python (hypothesis): $((CASES / 10)) examples per target"
-POPUP_FUZZ_EXAMPLES="$((CASES / 10))" python -m pytest -m slow tests/test_fuzz_runs.py \
+POPUP_FUZZ_EXAMPLES="$((CASES / 10))" python -m pytest -m slow tests/test_fuzz_runs.py tests/test_fuzz_api.py \
   -p no:cacheprovider --hypothesis-show-statistics 2>&1 | grep -E "::|passing|failing|passed|failed|Error" || true

@@ -75,6 +75,10 @@ _LONG_RUN = textwrap.dedent(
             m.replay(np.linspace(0.0, 5000.0, 5), np.zeros((5, 3)), sample_rate=10)
         elif kind == "batch":
             m.rollout(payload_kg=[1.0, 2.0, 1.5], torque=[0.0, 0.0, 0.0], duration=5000.0, sample_rate=10, threads=2)
+        elif kind == "linearize":  # a sweep of 200000 operating points (minutes)
+            popup.frequency.linearize(m, q_motor=np.zeros((200_000, 3)))
+        elif kind == "frf":  # a stepped sine at a very low frequency (minutes)
+            popup.frequency.simulate(m, [0.02], input="torque", settle_s=0.0, max_settle_s=1e4)
         else:
             t = popup.control.Task([popup.control.Phase("holding")])
             popup.Model(dt=1e-4).rollout_task(t, duration=500.0, sample_rate=10)
@@ -93,7 +97,7 @@ def _default_sigint() -> None:
 
 
 @pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
-@pytest.mark.parametrize("kind", ["replay", "batch", "closed_loop"])
+@pytest.mark.parametrize("kind", ["replay", "batch", "closed_loop", "linearize", "frf"])
 def test_ctrl_c_stops_a_long_run_from_python(kind):
     p = subprocess.Popen([sys.executable, "-c", _LONG_RUN, kind], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
     try:

@@ -149,13 +149,14 @@ def _flat(x, pre=""):
 
 def test_thesis_arm_differs_from_popup_lab_only_where_it_says():
     """Every key of popup-lab-thesis that differs from popup-lab is one its file lists:
-    name, the armature, link 2's stiffness and damping scales, link 2's outer tube mass."""
+    name, the armature, the drive limit, link 2's stiffness and damping scales, link 2's
+    outer tube mass."""
     a = _flat(tomllib.loads(popup.Model("popup-lab").arm.to_toml()))
     b = _flat(tomllib.loads(popup.Model("popup-lab-thesis").arm.to_toml()))
     diff = {k for k in set(a) | set(b) if a.get(k) != b.get(k)}
-    assert diff == {"name", "motors.armature_kgm2", "links[1].stiffness_scale", "links[1].damping_scale", "bodies[6].parts[0].mass_kg"}
+    assert diff == {"name", "motors.armature_kgm2", "motors.tau_max_nm", "links[1].stiffness_scale", "links[1].damping_scale", "bodies[6].parts[0].mass_kg"}
     text = popup.Arm.packaged_source("popup-lab-thesis")
-    for word in ("armature", "stiffness_scale", "damping_scale", "outer piece"):
+    for word in ("armature", "tau_max_nm", "stiffness_scale", "damping_scale", "outer piece"):
         assert word in text
     assert "popup-lab-thesis" in popup.arm_names()
     # the compiled-in text is the repository's file (a stale build would test old numbers)

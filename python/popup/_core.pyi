@@ -96,8 +96,10 @@ def run_scenario(
 
 EFFECT_NAMES: List[str]
 BEAM_PRESETS: Dict[str, Dict[str, float]]
-#: (columns, unit, min, warn_abs, error_abs, advice) per measured channel group.
-CHANNEL_LIMITS: List[Tuple[List[str], str, float, float, float, str]]
+#: (columns, unit, min, warn, error, scale, advice) per measured channel group: warn and
+#: error in the unit when scale is "", else factors of the arm's number ("drive torque",
+#: "arm acceleration"; Arm.channel_limits() gives the numbers).
+CHANNEL_LIMITS: List[Tuple[List[str], str, float, float, float, str, str]]
 GAP_WARN_STEPS: float
 GAP_ERROR_STEPS: float
 MAX_STEPS: float
@@ -119,6 +121,8 @@ class Arm:
     def with_overrides(self, overrides: Dict[str, Any]) -> Arm: ...
     @property
     def name(self) -> str: ...
+    def channel_limits(self) -> List[Tuple[List[str], str, float, float, float, str]]: ...
+    def reach(self) -> Dict[str, Any]: ...
     def __eq__(self, value: object, /) -> bool: ...
 
 @final

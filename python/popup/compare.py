@@ -113,6 +113,7 @@ import numpy as np
 
 from .exceptions import InputError, MeasuredRunError
 from .io import MeasuredRun
+from .model import _names, _scalar
 from .problem import DEFAULT_CHANNELS, ReplayProblem, Shifted
 from .results import UNITS, SimResult
 
@@ -332,6 +333,10 @@ class Comparison:
 # ---------------------------------------------------------------------------- compare
 
 
+#: Most windows :func:`compare` reports (each costs a pass over the samples).
+_MAX_WINDOWS = 1000
+
+
 def compare(
     model: "Model",
     run: MeasuredRun,
@@ -374,8 +379,20 @@ def compare(
     pd = _pd()
     if not isinstance(run, MeasuredRun):
         raise InputError(f"compare: expected a popup.MeasuredRun (popup.read_run), got {type(run).__name__}")
-    if int(lags) < 1 or int(n_windows) < 1:
-        raise InputError(f"compare: lags ({lags}) and n_windows ({n_windows}) must be ≥ 1")
+    for name, val in (("lags", lags), ("n_windows", n_windows)):
+        if isinstance(val, (bool, np.bool_)) or not isinstance(val, (int, np.integer)) or val < 1:
+            raise InputError(f"compare: input {name}: expected an integer ≥ 1, got {val!r}")
+    if n_windows > min(len(run), _MAX_WINDOWS):  # bounded work: a window needs a sample; each costs a pass
+        raise InputError(
+            f"compare: input n_windows: {n_windows} windows for a run of {len(run)} samples; at most "
+            f"{min(len(run), _MAX_WINDOWS)} (one sample per window, and at most {_MAX_WINDOWS} rows in the window table)"
+        )
+    if channels is not None:
+        channels = _names("channels", channels)
+    if sample_rate is not None:
+        sample_rate = _scalar("sample_rate", sample_rate, "Hz")
+        if not (math.isfinite(sample_rate) and sample_rate > 0):
+            raise InputError(f"compare: input sample_rate: {sample_rate!r} Hz must be finite and > 0")
     L = int(lags)
     if problem is None:
         problem = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate)

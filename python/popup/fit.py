@@ -84,6 +84,55 @@ def _parse(names: Sequence[str]) -> List[Tuple[fx.EffectParam, int, str]]:
     return out
 
 
+def _check_args(
+    params: Any, bounds: Any, scale: Any, x0: Any, grid: Any, channels: Any, sample_rate: Any, threads: Any, max_iter: Any, starts: Any
+) -> Tuple[Optional[List[str]], Optional[float]]:
+    """Refuse arguments of the wrong kind with an InputError naming the argument (before
+    anything is simulated); return ``channels`` and ``sample_rate`` normalised."""
+    from .model import _names, _scalar, _threads
+
+    if not isinstance(params, str):
+        _names("params", params)
+    for what, d in (("bounds", bounds), ("scale", scale), ("x0", x0), ("grid", grid)):
+        if d is not None and not isinstance(d, Mapping):
+            raise InputError(f"input {what}: expected a mapping of parameter names ('effect.name[i]') to values, got {d!r}")
+        for k in d or {}:
+            if not isinstance(k, str):
+                raise InputError(f"input {what}: key {k!r} is not a parameter name ('effect.name[i]')")
+    for name, v, lo, hi in (("max_iter", max_iter, 0, 10**6), ("starts", starts, 1, 10**3)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+            raise InputError(f"input {name}: expected an integer from {lo} to {hi}, got {v!r}")
+    _threads(threads)
+    ch = None if channels is None else _names("channels", channels)
+    rate = None
+    if sample_rate is not None:
+        rate = _scalar("sample_rate", sample_rate, "Hz")
+        if not (np.isfinite(rate) and rate > 0):
+            raise InputError(f"input sample_rate: {rate!r} Hz must be finite and > 0")
+    return ch, rate
+
+
+def _number(what: str, key: str, v: Any) -> float:
+    """``v`` as one float, or an InputError naming argument ``what`` and entry ``key``."""
+    try:
+        if np.ndim(v) != 0:
+            raise TypeError(f"shape {np.shape(v)}")
+        return float(v)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"input {what}: {key}: expected one number, got {v!r} ({e})") from None
+
+
+def _bounds_pair(key: str, b: Any) -> Tuple[float, float]:
+    """``(lower, upper)`` of ``bounds[key]``, or an InputError naming ``bounds``."""
+    try:
+        a = np.asarray(b, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"input bounds: {key}: expected (lower, upper), got {b!r} ({e})") from None
+    if a.shape != (2,):
+        raise InputError(f"input bounds: {key}: expected (lower, upper), got {b!r}")
+    return float(a[0]), float(a[1])
+
+
 def _lookup(d: Optional[Mapping[str, Any]], key: str, per_entry_ndim: int) -> Any:
     """``d[key]`` for ``key = "effect.name[i]"``, else ``d["effect.name"]`` (its entry i
     when it has ``per_entry_ndim`` dimensions: one value per entry), else None."""
@@ -94,7 +143,12 @@ def _lookup(d: Optional[Mapping[str, Any]], key: str, per_entry_ndim: int) -> An
     base, i = key.rsplit("[", 1)
     if base in d:
         v = d[base]
-        return v[int(i[:-1])] if np.ndim(v) == per_entry_ndim else v
+        if np.ndim(v) != per_entry_ndim:
+            return v
+        try:
+            return v[int(i[:-1])]
+        except (IndexError, KeyError, TypeError):
+            raise InputError(f"input: {base}: {v!r} has no entry {i[:-1]} (one value per entry of {base})") from None
     return None
 
 
@@ -219,6 +273,7 @@ def fit_params(
         at a bound.
     """
     t_start = time.perf_counter()
+    channels, sample_rate = _check_args(params, bounds, scale, x0, grid, channels, sample_rate, threads, max_iter, starts)
     entries = _parse(params)
     for what, d in (("bounds", bounds), ("scale", scale), ("x0", x0), ("grid", grid)):
         for k in d or {}:
@@ -230,19 +285,19 @@ def fit_params(
     start, sc = [], []
     for p, i, key in entries:
         b = _lookup(bounds, key, 2)
-        lo, hi = (p.lower, p.upper) if b is None else (float(b[0]), float(b[1]))
+        lo, hi = (p.lower, p.upper) if b is None else _bounds_pair(key, b)
         if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
             raise InputError(f"input bounds: {key}: ({lo}, {hi}) must be finite with lower < upper")
         free.append((dataclasses.replace(p, lower=lo, upper=hi), i))
         v = _lookup(x0, key, 1)
-        v = float(flat[p.offset + i]) if v is None else float(v)
+        v = float(flat[p.offset + i]) if v is None else _number("x0", key, v)
         if not np.isfinite(v):
             raise InputError(f"input x0: {key} = {v}: give a finite start (x0={{{key!r}: ...}})")
         if not lo <= v <= hi:
             raise InputError(f"input x0: {key} = {v} is outside its bounds [{lo}, {hi}]")
         start.append(v)
         s = _lookup(scale, key, 1)
-        s = est.PARAM_SCALE.get((p.effect, p.name), max(abs(v), 1e-12)) if s is None else float(s)
+        s = est.PARAM_SCALE.get((p.effect, p.name), max(abs(v), 1e-12)) if s is None else _number("scale", key, s)
         if not (np.isfinite(s) and s > 0):
             raise InputError(f"input scale: {key} = {s} must be finite and > 0")
         sc.append(s)

@@ -40,6 +40,7 @@ record, with a warning saying what was lost.
 from __future__ import annotations
 
 import csv
+import functools
 import io as _stdio
 import json
 import math
@@ -75,6 +76,7 @@ __all__ = [
     "MeasuredRun",
     "read_run",
     "write_run",
+    "arm_limits",
     "from_sim",
     "sim_experiment",
 ]
@@ -292,9 +294,12 @@ class MeasuredRun:
         reading is checked too). Diagnosis calls it first, so a data glitch is never
         blamed on missing physics."""
         lines = self._lines if self._lines is not None and len(self._lines) == len(self.data) else None
-        _check_data(self.data, self._where(), lines, [])
+        _check_data(self.data, self._where(), lines, [], _run_limits(self.arm, self._folder(), self._where(), []))
 
     # -------------------------------------------------------------- helpers
+    def _folder(self) -> Path:
+        return self.source.parent if self.data_file == self.source else self.source
+
     def _where(self) -> str:
         return str(self.data_file if self.data_file is not None else self.source)
 
@@ -378,7 +383,8 @@ def read_run(path: PathLike) -> MeasuredRun:
     else:
         raise MeasuredRunError(f"{folder}: missing measurements file; expected {_CSV} (or {_PARQUET})")
 
-    df = _check_data(df, str(data_path), lines, warns)
+    lim = _run_limits(typed["arm"], folder, str(toml_path), warns)
+    df = _check_data(df, str(data_path), lines, warns, lim)
     _check_replay(typed, df, str(toml_path), str(data_path), lines, warns)
     for w in warns:
         _warnings.warn(w, PopupWarning, stacklevel=2)
@@ -415,7 +421,8 @@ def _read_mcap(p: Path) -> MeasuredRun:
             f"{p}: {cut}no measured-run samples: none of the topics {', '.join(log.topics) or '(none)'} has a "
             f"measured-run column ({', '.join(MEASURED_COLUMNS[1:])})"
         )
-    df = _check_data(log._frame(cols), str(p), None, warns)
+    lim = _run_limits(typed["arm"], p.parent, where_exp, warns)
+    df = _check_data(log._frame(cols), str(p), None, warns, lim)
     _check_replay(typed, df, where_exp, str(p), None, warns)
     for w in warns:
         _warnings.warn(w, PopupWarning, stacklevel=3)
@@ -700,9 +707,10 @@ def _raise_first_bad_cell(df: "pd.DataFrame", cols: Sequence[Any], where: str, l
     )
 
 
-def _check_data(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], warns: List[str]) -> "pd.DataFrame":
-    """Validate the measurements; return them with every column as float64 (values
-    unchanged: integers are exact in float64 up to 2**53)."""
+def _check_data(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], warns: List[str], limits: Optional[_Limits] = None) -> "pd.DataFrame":
+    """Validate the measurements (plausibility per ``limits``, default :data:`LIMITS`);
+    return them with every column as float64 (values unchanged: integers are exact in
+    float64 up to 2**53)."""
     pd = _pd()
     names = list(df.columns)
     for j, c in enumerate(names):
@@ -736,7 +744,7 @@ def _check_data(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], war
             f"not after {_row(i - 1, lines)} (t = {_num(t[i - 1])} s)"
         )
 
-    _check_plausible(out, where, lines, warns)
+    _check_plausible(out, where, lines, warns, LIMITS if limits is None else limits)
 
     unknown = [c for c in names if c not in MEASURED_COLUMNS]
     if unknown:
@@ -748,21 +756,59 @@ def _check_data(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], war
     return out
 
 
-LIMITS: Dict[str, Tuple[str, float, float, float, str]] = {
-    c: (unit, lo, warn, err, advice) for cols, unit, lo, warn, err, advice in _core.CHANNEL_LIMITS for c in cols
-}
-"""Plausibility limits of the measured-run columns: ``column -> (unit, min, warn_abs,
-error_abs, advice)``. The one registry is the engine's (``popup_core::limits``, exposed as
-``popup._core.CHANNEL_LIMITS``); :func:`read_run` refuses values beyond ``error_abs`` (or
-below ``min``) and warns about values beyond ``warn_abs``."""
+_Limits = Dict[str, Tuple[str, float, float, float, str]]
 
 
-def _check_plausible(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], warns: List[str]) -> None:
+@functools.lru_cache(maxsize=16)
+def _limits_of(arm_toml: str) -> Tuple[Tuple[str, Tuple[str, float, float, float, str]], ...]:
+    rows = _core.Arm.from_toml(arm_toml, "<arm>").channel_limits()
+    return tuple((c, (unit, lo, warn, err, advice)) for cols, unit, lo, warn, err, advice in rows for c in cols)
+
+
+def arm_limits(arm: Any = "popup-lab") -> _Limits:
+    """Plausibility limits of the measured-run columns for ``arm`` (an :class:`~popup.Arm`,
+    a name or an arm file, as :func:`~popup.load_arm` takes): ``column -> (unit, min,
+    warn_abs, error_abs, advice)``. The factors are the engine's one registry
+    (``popup_core::limits``, exposed as ``popup._core.CHANNEL_LIMITS``); torque limits are
+    factors of the arm's drive limits (``motors.tau_max_nm``), IMU limits factors of the
+    specific force the arm can reach (``Arm.reach()``: drive torques and link collapse
+    moments through its mass matrix, plus gravity). :func:`read_run` refuses values beyond
+    ``error_abs`` (or below ``min``) and warns about values beyond ``warn_abs``."""
+    from .model import load_arm
+
+    return dict(_limits_of(load_arm(arm).to_toml()))
+
+
+LIMITS: _Limits = arm_limits("popup-lab")
+"""Plausibility limits of the measured-run columns for the built-in ``popup-lab`` arm
+(:func:`arm_limits`); a run is checked against the limits of its own arm."""
+
+
+def _run_limits(arm: str, folder: Optional[Path], where: str, warns: List[str]) -> _Limits:
+    """The limits of a run's arm (its path resolved against ``folder``); an arm that cannot
+    be loaded (its error comes when a model is built) gives popup-lab's, with a warning."""
+    from .exceptions import PopupError
+
+    err: Optional[BaseException] = None
+    for cand in ([_resolve_arm(arm, folder)] if folder is not None else []) + [arm]:
+        try:
+            return arm_limits(cand)
+        except (PopupError, OSError, ValueError) as e:
+            err = err or e
+    warns.append(
+        f"{where}: arm {arm!r} could not be loaded ({err}); the measurements were checked against the plausibility "
+        f"limits of popup-lab"
+    )
+    return LIMITS
+
+
+def _check_plausible(df: "pd.DataFrame", where: str, lines: Optional[np.ndarray], warns: List[str], limits: _Limits) -> None:
     """Refuse values no arm produces, warn about values that look wrong (time gaps far
     beyond the median step, angles that look like degrees, ...), each naming the row and
-    column and saying what to do. Limits: :data:`LIMITS` and ``_core.GAP_*_STEPS``."""
+    column and saying what to do. Limits: ``limits`` (:func:`arm_limits`) and
+    ``_core.GAP_*_STEPS``."""
     for c in df.columns:
-        lim = LIMITS.get(str(c))
+        lim = limits.get(str(c))
         if lim is None:
             continue
         unit, lo, warn, err, advice = lim
@@ -930,7 +976,7 @@ def write_run(
     df = _as_frame(data)
     warns: List[str] = []
     typed = _check_experiment(exp, "write_run experiment", None, warns)
-    _check_data(df, "write_run data", None, warns)
+    _check_data(df, "write_run data", None, warns, _run_limits(typed["arm"], None, "write_run experiment", warns))
     _check_replay(typed, df, "write_run experiment", "write_run data", None, warns)
     for w in warns:
         _warnings.warn(w, PopupWarning, stacklevel=2)

@@ -89,7 +89,11 @@ def load_arm(arm: ArmLike) -> "_core.Arm":
     :class:`UnknownArmError` listing the known ones."""
     if isinstance(arm, _core.Arm):
         return arm
+    if not isinstance(arm, (str, os.PathLike)):
+        raise InputError(f"input arm: expected an Arm, a built-in name ({', '.join(arm_names())}) or a path to an arm file, got {arm!r}")
     s = os.fspath(arm)
+    if not isinstance(s, str) or "\x00" in s:
+        raise InputError(f"input arm: {s!r} is not an arm name or a path to an arm file")
     if s in _core.Arm.builtin_names():
         return _core.Arm.builtin(s)
     if s.endswith(".toml") or os.path.exists(s):
@@ -98,6 +102,8 @@ def load_arm(arm: ArmLike) -> "_core.Arm":
 
 
 def _as_float_array(name: str, x: Any, ndim: Optional[int]) -> np.ndarray:
+    if np.iscomplexobj(x):
+        raise InputError(f"input {name}: complex values; expected real numbers")
     try:
         a = np.array(x, dtype=np.float64)
     except (TypeError, ValueError) as e:
@@ -107,11 +113,34 @@ def _as_float_array(name: str, x: Any, ndim: Optional[int]) -> np.ndarray:
     return a
 
 
+def _names(name: str, x: Any) -> List[str]:
+    """A list of names (one string counts as one name), or an InputError naming ``name``."""
+    if isinstance(x, str):
+        return [x]
+    try:
+        out = list(x)
+    except TypeError:
+        raise InputError(f"input {name}: expected a list of names, got {x!r}") from None
+    bad = [v for v in out if not isinstance(v, str)]
+    if bad:
+        raise InputError(f"input {name}: expected names (strings), got {bad[0]!r}")
+    return out
+
+
+def _flag(name: str, x: Any) -> bool:
+    """A bool (or 0/1), or an InputError naming ``name``."""
+    if isinstance(x, (bool, np.bool_)) or (isinstance(x, (int, np.integer)) and x in (0, 1)):
+        return bool(x)
+    raise InputError(f"input {name}: expected True or False, got {x!r}")
+
+
 def _scalar(name: str, x: Any, unit: str) -> float:
     """One number of argument ``name``, or an InputError naming it."""
     try:
         if np.ndim(x) != 0:
             raise TypeError(f"shape {np.shape(x)}")
+        if np.iscomplexobj(x):
+            raise TypeError("complex")
         return float(x)
     except (TypeError, ValueError) as e:
         raise InputError(f"input {name}: expected one number [{unit}], got {x!r} ({e})") from None
@@ -121,6 +150,8 @@ def _pair(name: str, x: Any) -> Tuple[float, float]:
     """Link 1 and link 2 values of ``name`` (one number is used for both), or an
     InputError naming the argument."""
     try:
+        if np.iscomplexobj(x):
+            raise TypeError("complex")
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise InputError(f"input {name}: expected (link 1, link 2) [Pa] or one number for both, got {x!r} ({e})") from None
@@ -207,11 +238,13 @@ class Model:
         disable: Iterable[str] = (),
         _core_model: Optional["_core.Model"] = None,
     ) -> None:
-        dis = list(disable)
-        if not gravity and "gravity" not in dis:
+        dis = _names("disable", disable)
+        if not _flag("gravity", gravity) and "gravity" not in dis:
             dis.append("gravity")
         if _core_model is None:
-            _core_model = _core.Model(load_arm(arm), dt=dt, integrator=integrator, disable=dis)
+            if not isinstance(integrator, str):
+                raise InputError(f"input integrator: expected a name (\"rk4\" or \"semi_implicit\"), got {integrator!r}")
+            _core_model = _core.Model(load_arm(arm), dt=_scalar("dt", dt, "s"), integrator=integrator, disable=dis)
         self._m = _core_model
         spec_defaults = self._defaults()
         self.payload_kg = _scalar("payload_kg", spec_defaults[0] if payload_kg is None else payload_kg, "kg")
@@ -652,13 +685,13 @@ class Model:
             None if replay else float(duration),  # type: ignore[arg-type]
             1.0 / float(sample_rate),
             _threads(threads),
-            bool(check_step),
+            _flag("check_step", check_step),
             fx_b,
             None if log is None else os.fspath(log),
             log_exp,
         )
         err_msgs: List[Optional[str]] = [None if e is None else e[1] for e in errors]
-        _report(errors, warns, raise_on_error)
+        _report(errors, warns, _flag("raise_on_error", raise_on_error))
         params = self.describe()
         params.update(
             {
@@ -780,10 +813,10 @@ class Model:
             np.ascontiguousarray(g_b),
             fx_b,
             _threads(threads),
-            bool(check_step),
+            _flag("check_step", check_step),
             "<task>",
         )
-        _report(errors, warns, raise_on_error)
+        _report(errors, warns, _flag("raise_on_error", raise_on_error))
         params = self.describe()
         params.update({"payload_kg": pay_b, "pressure_pa": pres_b, "q0": q0_b, "task": text, "sample_rate_hz": float(sample_rate), "seed": None})
         names = [p.name or p.kind.capitalize() for p in task.phases]

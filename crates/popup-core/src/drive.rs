@@ -54,6 +54,19 @@ impl Spline3 {
     pub fn new(t: &[f64], y: &[[f64; NM]]) -> Result<Spline3> {
         check_times("encoder replay", t, y.len())?;
         check_values("encoder replay angles", y)?;
+        // plausibility (popup_core::limits): an angle no motor joint reaches is refused, not
+        // handed to the static solve (1e300 rad ended as "equilibrium did not converge")
+        let lim = crate::limits::channel_limit("q1").map_or(f64::INFINITY, |l| l.error);
+        for (i, row) in y.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                if v.abs() > lim {
+                    return Err(Error::input(
+                        "encoder replay angles",
+                        format!("value at row {i}, column {c} (q{}) is {} rad, beyond {} rad (4 turns): no motor joint reaches it; degrees? (convert with × π/180)", c + 1, crate::limits::num(*v), crate::limits::num(lim)),
+                    ));
+                }
+            }
+        }
         let n = t.len();
         let mut m = vec![[0.0; NM]; n];
         if n > 2 {

@@ -576,6 +576,7 @@ impl Model {
                     let m = motor_spec.len();
                     if m < NM {
                         base_armature[i] = nonneg(&format!("motors.armature_kgm2[{m}]"), spec.motors.armature_kgm2[m])?;
+                        positive(&format!("motors.tau_max_nm[{m}]"), spec.motors.tau_max_nm[m])?;
                     }
                     motor_spec.push(i)
                 }

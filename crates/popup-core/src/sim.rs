@@ -230,13 +230,19 @@ pub(crate) fn track_alarms(open: &mut [Option<usize>; 2], alarms: &mut Vec<Alarm
 /// [`Error::Input`] naming `sample_period`.
 pub fn check_sample_period(sample_period: f64, dt: f64) -> Result<usize> {
     if !(sample_period.is_finite() && sample_period > 0.0) {
-        return Err(Error::input("sample_period", format!("{} s must be finite and > 0", num(sample_period))));
+        return Err(Error::input("sample_period (1/sample_rate)", format!("{} s must be finite and > 0", num(sample_period))));
     }
     let r = (sample_period / dt).round().max(1.0);
     if r > crate::limits::MAX_STEPS || (r * dt - sample_period).abs() > 1e-9 * sample_period {
         return Err(Error::input(
-            "sample_period",
-            format!("{} s is not a whole multiple of dt = {} s (sample rate must divide the physics rate)", num(sample_period), num(dt)),
+            "sample_period (1/sample_rate)",
+            format!(
+                "{} s is not a whole multiple of dt = {} s (the sample rate {} Hz must divide the physics rate {} Hz)",
+                num(sample_period),
+                num(dt),
+                num(1.0 / sample_period),
+                num(1.0 / dt)
+            ),
         ));
     }
     Ok(r as usize)

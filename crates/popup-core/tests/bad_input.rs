@@ -182,8 +182,8 @@ fn bad_drive_and_run_config() {
 
     let m = lab(1e-3, Integrator::Rk4);
     let pd = ParamData::new(&m, &defaults()).unwrap();
-    expect_input(run(&m, &pd, &torque_cfg(Some(0.1), 1.5e-3)), "sample_period", &["0.0015", "whole multiple", "dt = 0.001"]);
-    expect_input(run(&m, &pd, &torque_cfg(Some(0.1), 0.0)), "sample_period", &["> 0"]);
+    expect_input(run(&m, &pd, &torque_cfg(Some(0.1), 1.5e-3)), "sample_period (1/sample_rate)", &["0.0015", "whole multiple", "dt = 0.001", "sample rate 666.6666666666666 Hz must divide the physics rate 1000.0 Hz"]);
+    expect_input(run(&m, &pd, &torque_cfg(Some(0.1), 0.0)), "sample_period (1/sample_rate)", &["> 0"]);
     expect_input(run(&m, &pd, &torque_cfg(None, 1e-3)), "duration", &["torque-driven run needs a duration"]);
     expect_input(run(&m, &pd, &torque_cfg(Some(f64::NAN), 1e-3)), "duration", &["NaN"]);
     let mut q = VecN::zeros();

@@ -69,3 +69,15 @@ fn a_raised_stop_flag_ends_the_runs_early() {
         assert!(tr.final_state.t < 2.0, "{}", tr.final_state.t);
     }
 }
+
+#[test]
+fn an_encoder_angle_no_motor_reaches_is_refused_naming_row_and_column() {
+    // found by the replay fuzzing: 1e300 rad ended as a static-equilibrium failure
+    let t = [0.0, 2.246687641658144e-211, 1.0];
+    let e = Spline3::new(&t, &[[0.0; 3], [0.0, 0.0, 1e300], [0.0; 3]]).unwrap_err();
+    assert!(matches!(e, Error::Input { .. }), "{e:?}");
+    let msg = e.to_string();
+    assert!(msg.contains("row 1, column 2 (q3) is 1e300 rad") && msg.contains("4 turns"), "{msg}");
+    // four turns are still an angle
+    assert!(Spline3::new(&[0.0, 1.0], &[[0.0; 3], [25.0, -25.0, 0.0]]).is_ok());
+}

@@ -8,6 +8,9 @@ use popup_core::spec::ArmSpec;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 
+/// One row of `Arm.channel_limits()`.
+type ArmLimitRow = (Vec<String>, String, f64, f64, f64, String);
+
 /// An arm description (the content of an arm file). Immutable; `with_overrides` returns
 /// a modified copy.
 #[pyclass(name = "Arm", module = "popup._core", frozen)]
@@ -133,6 +136,30 @@ impl PyArm {
     #[getter]
     fn name(&self) -> String {
         self.spec.name.clone()
+    }
+
+    /// The plausibility limits of measured runs for this arm, in numbers: a list of
+    /// `(columns, unit, min, warn_abs, error_abs, advice)`; torque limits from the drives
+    /// (`motors.tau_max_nm`), acceleration limits from `reach()` (`popup_core::limits::for_arm`).
+    fn channel_limits(&self, py: Python<'_>) -> PyResult<Vec<ArmLimitRow>> {
+        let spec = self.spec.clone();
+        let lims = py.detach(move || popup_core::limits::for_arm(&spec)).py()?;
+        Ok(lims.into_iter().map(|l| (l.columns.iter().map(|c| c.to_string()).collect(), l.unit.to_string(), l.min, l.warn_abs, l.error_abs, l.advice)).collect())
+    }
+
+    /// What the arm can produce (`popup_core::limits::arm::reach`): a dict with
+    /// `tau_max_nm` (3) [N·m], `collapse_nm` (2) [N·m], `joint_accel` (nv) [rad/s²],
+    /// `motor_accel` (3) [rad/s²], `imu_accel` (2) [m/s²].
+    fn reach<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let spec = self.spec.clone();
+        let r = py.detach(move || popup_core::limits::arm::reach(&spec)).py()?;
+        let d = PyDict::new(py);
+        d.set_item("tau_max_nm", r.tau_max_nm.to_vec())?;
+        d.set_item("collapse_nm", r.collapse_nm.to_vec())?;
+        d.set_item("joint_accel", r.joint_accel)?;
+        d.set_item("motor_accel", r.motor_accel.to_vec())?;
+        d.set_item("imu_accel", r.imu_accel.to_vec())?;
+        Ok(d)
     }
 
     fn __repr__(&self) -> String {

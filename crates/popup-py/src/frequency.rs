@@ -55,15 +55,17 @@ pub fn linearize<'py>(
     }
     let fx = crate::model::effects_rows(py, effects, nb, model.m.spec.effects)?;
     let m = model.m.clone();
-    let res = py.detach(move || -> Vec<popup_core::Result<(popup_core::linear::LinearModel, Vec<String>)>> {
+    // Ctrl-C: the helper thread stops between operating points (each takes milliseconds)
+    let res = crate::errors::interruptible(py, move |stop| -> Vec<popup_core::Result<(popup_core::linear::LinearModel, Vec<String>)>> {
         (0..nb)
+            .take_while(|_| !stop.load(std::sync::atomic::Ordering::Relaxed))
             .map(|b| {
                 let pd = ParamData::new(&m, &Params { payload_kg: pay[b], pressure_pa: [pres[[b, 0]], pres[[b, 1]]], effects: fx[b] })?;
                 let lin = linearize_at_rest(&m, &pd, [qm[[b, 0]], qm[[b, 1]], qm[[b, 2]]], kind, &out_idx, t)?;
                 Ok((lin, pd.warnings.clone()))
             })
             .collect()
-    });
+    })?;
     let mut lins = Vec::with_capacity(nb);
     for (b, r) in res.into_iter().enumerate() {
         match r {

@@ -18,6 +18,9 @@ fn _raise(py: Python<'_>, cls: &str, msg: &str) -> PyResult<()> {
     Err(errors::make(py, cls, msg))
 }
 
+/// One row of `_core.CHANNEL_LIMITS`: (columns, unit, min, warn, error, scale, advice).
+type LimitRow = (Vec<&'static str>, &'static str, f64, f64, f64, &'static str, &'static str);
+
 #[pymodule(gil_used = false)]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<arm::PyArm>()?;
@@ -38,8 +41,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     }
     m.add("BEAM_PRESETS", presets)?;
     // the one registry of bounds and measured-data plausibility limits (popup_core::limits)
-    let lim: Vec<(Vec<&str>, &str, f64, f64, f64, &str)> =
-        popup_core::limits::CHANNEL_LIMITS.iter().map(|l| (l.columns.to_vec(), l.unit, l.min, l.warn_abs, l.error_abs, l.advice)).collect();
+    // (columns, unit, min, warn, error, scale, advice): warn/error in the unit when scale
+    // is "", else factors of the arm's number (`Arm.channel_limits()` gives the numbers)
+    let lim: Vec<LimitRow> =
+        popup_core::limits::CHANNEL_LIMITS.iter().map(|l| (l.columns.to_vec(), l.unit, l.min, l.warn, l.error, l.scale.name(), l.advice)).collect();
     m.add("CHANNEL_LIMITS", lim)?;
     m.add("GAP_WARN_STEPS", popup_core::limits::GAP_WARN_STEPS)?;
     m.add("GAP_ERROR_STEPS", popup_core::limits::GAP_ERROR_STEPS)?;

@@ -175,6 +175,16 @@ pub struct PayloadSpec {
 pub struct MotorSpec {
     /// Reflected rotor inertia (armature) at each motor joint output [kg·m²].
     pub armature_kgm2: [f64; 3],
+    /// Torque limit of each motor joint's drive at the joint output [N·m] (> 0). The
+    /// plausibility limits of measured torques and accelerations scale with it
+    /// (`limits::arm`); absent from a complete arm file: the lab motoreducer's
+    /// `Motoreducer::DEFAULT.tau_max` on every joint.
+    #[serde(default = "default_tau_max")]
+    pub tau_max_nm: [f64; 3],
+}
+
+fn default_tau_max() -> [f64; 3] {
+    [crate::control::motor::Motoreducer::DEFAULT.tau_max; 3]
 }
 
 /// One row of a rigid 3-DOF DH table.
@@ -363,7 +373,7 @@ impl ArmSpec {
                 imu: vec![SensorMount { body: 4, position_m: [0.0; 3] }, SensorMount { body: 7, position_m: [0.0; 3] }],
                 end_effector: SensorMount { body: 7, position_m: [0.0; 3] },
             },
-            motors: MotorSpec { armature_kgm2: [0.8; 3] },
+            motors: MotorSpec { armature_kgm2: [0.8; 3], tau_max_nm: default_tau_max() },
             rigid: RigidSpec {
                 as_built: RigidTable { d: [0.15, 0.05, -0.12], a: [0.0, 0.745, 0.685], alpha: [FRAC_PI_2, 0.0, 0.0], theta_offset: [0.0; 3] },
                 ik: RigidTable { d: [0.0; 3], a: [0.0, 0.745, 0.685], alpha: [FRAC_PI_2, 0.0, 0.0], theta_offset: [0.0; 3] },
