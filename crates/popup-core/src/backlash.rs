@@ -10,12 +10,14 @@
 //!
 //! τ_g is the torque the gear applies to the link side: on a flank, the constraint torque
 //! of the prescribed row, `(M q̈ + b − τ_drag)_p + J_out q̈_p`. A flank whose τ_g would have
-//! to pull is released. A free link side that reaches a flank is put on it and hits it
-//! plastically (restitution 0): the impulse on its row that makes its velocity the motor's,
-//! with the prescribed rows held ([`crate::forward::impulse_response`]). The mode is chosen
-//! at the start of each step from the state alone (no hidden state) and held through the
-//! step's stages; a contact that opens or closes inside a step is seen at the next one
-//! (first order in dt at the switch, exact between switches).
+//! to pull is released. A free link side that reaches a flank is put on it and hits it with
+//! the restitution e (`restitution`, 0 = plastic): the impulse on its row that leaves the
+//! relative speed −e times what it was, with the prescribed rows held
+//! ([`crate::forward::impulse_response`]). The modes are chosen from the state alone (no
+//! hidden state) and held through a segment's stages. A contact that closes inside a step
+//! is located on the cubic Hermite of x between the segment's ends; the step is cut there
+//! and finishes with the new modes (at most [`MAX_CONTACTS_PER_STEP`] cuts). A contact that
+//! opens inside a step is seen at the next one (first order in dt at the release).
 //!
 //! At rest (no initial state given) each link side lies on the flank its static load
 //! pushes it to; an unloaded one (e.g. a vertical axis) sits in the middle of its gap.
