@@ -271,8 +271,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             else:
                 print(f"note: the {eng} engine has no {e} family (skipped)")
         for k in kinds_extra:
-            if k not in ("nominal", "pairs", "disturbance"):
-                ap.error(f"--kinds: {k!r} is not one of nominal, pairs, disturbance")
+            if k not in ("nominal", "pairs", "disturbance", "backlash_held"):
+                ap.error(f"--kinds: {k!r} is not one of nominal, pairs, disturbance, backlash_held")
             plan.append((eng, k))
 
     # ---- generate

@@ -40,7 +40,10 @@ Two engines make the "real arm":
                        hinge on the same axis (play coordinate, 0.1 kg·m² of gear output
                        inertia), coupled by a dead-zone gear contact (K = 1e7 N·m/rad,
                        1000 N·m·s/rad, in contact only) - link side free inside the gap,
-                       resting against the side its load pushes it to
+                       resting against the side its load pushes it to; with ``held`` (the
+                       ``backlash_held`` family) no play dof: the servo tracks the play
+                       operator of the reference (started centred) and the encoder records
+                       the servo angle minus the play, the motor side
   pressure_leak        p(t) = p0·exp(-rate·t): ``jnt_stiffness``/``dof_damping`` of the
                        bending joints set from the arm's k(p), c(p) table every 1 ms (and
                        the p1 p2 channels, when recorded, show p(t))
@@ -110,7 +113,9 @@ EFFECT_FAMILIES: Dict[str, List[str]] = {
     "popup": list(LIBRARY),
     "mujoco": [e for e in LIBRARY if e != "actuator_saturation"],
 }
-FAMILY_KINDS = ("nominal", "pairs", "disturbance", *LIBRARY)
+#: other families: ``backlash_held`` is backlash with the link side held in its gap (a play
+#: operator), the law popup tries as an alternative of the free gear
+FAMILY_KINDS = ("nominal", "pairs", "disturbance", "backlash_held", *LIBRARY)
 CHANNEL_SETS = ("full", "no_mocap", "no_torque", "pressure_noisy")
 MEAS_ORDER = ["t", "q1", "q2", "q3", "tau1", "tau2", "tau3", "ee_x", "ee_y", "ee_z",
               "imu1_ax", "imu1_ay", "imu1_az", "imu2_ax", "imu2_ay", "imu2_az", "p1", "p2"]
@@ -522,6 +527,11 @@ class MujocoArm:
         self.k_link = [_k_of_p(self.spec, l, self.pressure[l])[0] for l in range(2)]
         self.c_link = [_k_of_p(self.spec, l, self.pressure[l])[1] for l in range(2)]
         self.hbm_scale = 1.0
+        bl = self.effects.get("backlash", {})
+        gap = [float(x) for x in bl.get("gap", [0.0, 0.0, 0.0])]
+        held = [bool(x) for x in bl.get("held", [0.0, 0.0, 0.0])]
+        self.free_gap = [0.0 if h else g for g, h in zip(gap, held)]
+        self.held_gap = [g if h else 0.0 for g, h in zip(gap, held)]
         self._build()
         if "higher_bending_modes" in self.effects:
             self._match_static_sag(nominal)
@@ -567,7 +577,7 @@ class MujocoArm:
         arm_r = spec["motors"]["armature_kgm2"]
         tors = self.effects.get("torsion")
         segs = self.effects.get("higher_bending_modes")
-        gaps = self.effects.get("backlash", {}).get("gap", [0.0, 0.0, 0.0])
+        gaps = self.free_gap
         rows: List[_Row] = []
         nmotor = 0
         first_bend: Dict[int, float] = {}
@@ -852,6 +862,16 @@ class MujocoArm:
         nstep = int(round(T / dt)) + 1
         th = np.arange(2 * nstep + 4) * (dt / 2)
         qref = exc(th)
+        play = np.zeros_like(qref)
+        if any(self.held_gap):
+            # a held link side: the servo (motor and link as one) tracks the play operator
+            # of the reference, and the encoder records the motor side (servo angle − play)
+            ql = qref[0].copy()
+            h = 0.5 * np.asarray(self.held_gap)
+            for i in range(len(qref)):
+                ql = np.clip(ql, qref[i] - h, qref[i] + h)
+                play[i] = ql - qref[i]
+            qref = qref + play
         dref = np.gradient(qref, dt / 2, axis=0)
         self._ctrl = qref + (self.kv / self.kp)[None, :] * dref
         mj.mj_resetData(m, d)
@@ -902,7 +922,8 @@ class MujocoArm:
                     mj.mj_forward(m, d)
                     r = rec[p]
                     qrec[p] = d.qpos
-                    r[0], r[1], r[2] = d.qpos[mq[0]], d.qpos[mq[1]], d.qpos[mq[2]]
+                    pl = play[2 * k]
+                    r[0], r[1], r[2] = d.qpos[mq[0]] - pl[0], d.qpos[mq[1]] - pl[1], d.qpos[mq[2]] - pl[2]
                     af = d.actuator_force
                     r[3] = af[0] - arm[0] * d.qacc[md[0]]
                     r[4] = af[1] - arm[1] * d.qacc[md[1]]
@@ -1256,10 +1277,12 @@ def family_specs(kind: str, engine: str, n: int, seed: int, **overrides: Any) ->
             names: List[str] = list(pairs[(i + seed) % len(pairs)])
         elif kind in LIBRARY:
             names = [kind]
+        elif kind == "backlash_held":
+            names = ["backlash"]
         else:
             names = []
         off = zlib.crc32(f"{engine}/{kind}".encode()) + int(seed)  # a family's own phase in the cycles below
-        level = "above" if (kind not in LIBRARY or kind == "higher_bending_modes") else ("near", "above")[(i + off) % 2]
+        level = "above" if ((kind not in LIBRARY and kind != "backlash_held") or kind == "higher_bending_modes") else ("near", "above")[(i + off) % 2]
         rates = [500.0, 1000.0] if "higher_bending_modes" in names else [500.0, 200.0, 1000.0]
         chans = _channel_options(names, engine)
         sp = RunSpec(engine=engine, family=kind, index=i, seed=int(seed), level=level)
@@ -1285,6 +1308,8 @@ def family_specs(kind: str, engine: str, n: int, seed: int, **overrides: Any) ->
             if level == "above":
                 sp.amplitude = _r(rng.uniform(1.3, 1.7))
         sp.effects = {e: effect_params(e, engine, level, rng, sp.channels) for e in names}
+        if kind == "backlash_held":
+            sp.effects["backlash"]["held"] = [1.0, 1.0, 1.0]
         if kind == "disturbance":
             f = _r(rng.uniform(1.2, 2.4))
             ph = _r(rng.uniform(0, 2 * math.pi))

@@ -173,6 +173,24 @@ def test_hidden_effect_ranks_first_halves_the_error_and_is_recovered(nominal, tr
         assert _within(fitted, true, 3.0 * ci, rel=0.02), (k, fitted, ci, true)
     assert top.evidence["signature"] == fx.SIGNATURES[name]
     assert top.evidence["text"]
+    if name == "backlash":
+        # a free link side is not taken for the held law
+        assert "held" not in top.variant, top.message
+
+
+def test_held_backlash_is_diagnosed_as_the_play_operator(nominal, traj, tmp_path_factory):
+    # another backlash law: the link side held inside the gap (a play operator on the
+    # encoder). The free gear fits it badly; the held alternative is tried anyway and kept.
+    truth = {"gap": [0.008, 0.016, 0.012], "held": [1.0, 1.0, 1.0]}
+    run = _run(nominal, traj, tmp_path_factory, {"backlash": truth}, "backlash_held")
+    d = popup.diagnose(nominal, run, effects=["backlash", "joint_friction", "payload_mass", "air_drag"])
+    top = d.suspects[0]
+    assert top.effect == "backlash" and top.significant, d.to_pandas()[["effect", "significant", "score", "error_after"]]
+    assert top.variant == "held link side (play operator)", top.message
+    assert top.params["held"] == [1.0, 1.0, 1.0]
+    assert top.error_after <= 0.5 * d.nominal_error
+    fitted, ci = np.asarray(top.params["gap"]), np.asarray(top.ci95["gap"])
+    assert _within(fitted, np.asarray(truth["gap"]), 3.0 * ci, rel=0.02), (fitted, ci)
 
 
 def test_no_hidden_effect_gives_no_significant_suspect(nominal, traj, tmp_path_factory):

@@ -45,7 +45,10 @@ held-out error falls).
 **Refinement.** A significant effect is also fitted in its richer variants
 (:data:`VARIANTS`: friction with Stribeck terms, three segments for bending, a centre-of-mass
 offset for the payload); a variant is kept when its score beats the base's by more than
-:data:`SCORE_THRESHOLD` (its extra parameters must pay for themselves).
+:data:`SCORE_THRESHOLD` (its extra parameters must pay for themselves). An *alternative*
+law of an effect (backlash with the link side held in its gap, a play operator, beside the
+gear with a free link side) is fitted whether or not the base is significant, and the one
+that scores higher is kept.
 
 **Identifiability.** Each fit's scaled Fisher matrix is checked (rank, condition,
 correlations, bounds); parameters the run cannot pin down get an infinite interval and are
@@ -130,12 +133,16 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
     "higher_bending_modes": [{"name": "3 segments", "structure": {"segments": [3.0, 3.0]}}],
     "payload_mass": [{"name": "centre-of-mass offset", "extra": ["com_offset_m"]}],
     # how fast a link side crosses its gap depends on the gear's link-side inertia
-    "backlash": [{"name": "fitted link-side inertia", "extra": ["inertia"], "seeds": [{"inertia": 0.003}, {"inertia": 0.03}, {"inertia": 0.1}, {"inertia": 0.3}]}],
+    "backlash": [{"name": "fitted link-side inertia", "extra": ["inertia"], "seeds": [{"inertia": 0.003}, {"inertia": 0.03}, {"inertia": 0.1}, {"inertia": 0.3}]},
+                 # a link side held by its bearing's friction, moved only by the flanks: another
+                 # law, not a refinement, so it is tried even when the free gear is not significant
+                 {"name": "held link side (play operator)", "structure": {"held": [1.0, 1.0, 1.0]}, "alternative": True}],
     "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
                 {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
 }
 """Richer variants tried when an effect is significant: ``extra`` parameters fitted with
-the base ones (from the base fit), or another ``structure``."""
+the base ones (from the base fit), or another ``structure``; an ``alternative`` (another
+law for the same effect) is tried whether the base is significant or not."""
 
 Progress = Callable[[Dict[str, Any]], None]
 
@@ -717,33 +724,34 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
                        message=f"not tested: {type(e).__name__}: {e}")
     best = fitted
     notes = [note] if note else []
-    if fitted.significant:
-        base_params = est.params_dict(name, fitted.out.flat)
-        for var in VARIANTS.get(name, []):
-            try:
-                struct = dict(_STRUCTURE.get(name) or {})
-                struct.update(var.get("structure") or {})
-                only = None
-                start = None
-                if var.get("extra"):
-                    only = sorted({p.name for p, _ in fitted.free} | set(var["extra"]))
-                    start = {k: v for k, v in base_params.items() if k in only and k not in var["extra"]}
-                # a structural variant starts from the base fit: its step is set for 1.5 × the
-                # base's stiffness, not the whole plausible range (3 segments at k_scale 5 would
-                # need a 14 × smaller step)
-                stiff = {k: [min(1.5 * x, est.BOUNDS.get((name, k), (0.0, math.inf))[1]) for x in base_params[k]]
-                         for k in _STIFFEST.get(name, {}) if k in base_params} if var.get("structure") else None
-                if var.get("structure") and stiff:
-                    start = {k: base_params[k] for k in stiff}
-                vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also, stiffest=stiff)
-            except Exception as e:  # noqa: BLE001
-                notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
-                continue
-            if vf.significant and vf.score > best.score + SCORE_THRESHOLD:
-                notes.append(f"variant {var['name']} preferred (score {vf.score:.1f} vs {best.score:.1f})")
-                best = vf
-            else:
-                notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f})")
+    base_params = est.params_dict(name, fitted.out.flat)
+    for var in VARIANTS.get(name, []):
+        if not (fitted.significant or var.get("alternative")):
+            continue
+        try:
+            struct = dict(_STRUCTURE.get(name) or {})
+            struct.update(var.get("structure") or {})
+            only = None
+            start = None
+            if var.get("extra"):
+                only = sorted({p.name for p, _ in fitted.free} | set(var["extra"]))
+                start = {k: v for k, v in base_params.items() if k in only and k not in var["extra"]}
+            # a structural variant starts from the base fit: its step is set for 1.5 × the
+            # base's stiffness, not the whole plausible range (3 segments at k_scale 5 would
+            # need a 14 × smaller step)
+            stiff = {k: [min(1.5 * x, est.BOUNDS.get((name, k), (0.0, math.inf))[1]) for x in base_params[k]]
+                     for k in _STIFFEST.get(name, {}) if k in base_params} if var.get("structure") else None
+            if var.get("structure") and stiff:
+                start = {k: base_params[k] for k in stiff}
+            vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also, stiffest=stiff)
+        except Exception as e:  # noqa: BLE001
+            notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
+            continue
+        if vf.significant and vf.score > best.score + (SCORE_THRESHOLD if best.significant else 0.0):
+            notes.append(f"variant {var['name']} preferred (score {vf.score:.1f} vs {best.score:.1f})")
+            best = vf
+        else:
+            notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f})")
     return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
 
 

@@ -70,7 +70,23 @@ pub const RIGID: Gears = Gears { off: [0.0; 3], free: ALL_PRESCRIBED };
 /// True when the run's physics needs the dynamic gear model: play on some joint in replay.
 #[inline]
 pub fn active(pd: &ParamData, drive: &Drive) -> bool {
-    drive.is_replay() && pd.params.effects.backlash.on()
+    drive.is_replay() && pd.params.effects.backlash.free_gap() != [0.0; 3]
+}
+
+/// Play operator over samples `y` of the motor angles [rad]: the link-side angles of gears
+/// whose link side is held inside full gaps `gap` [rad] (0 = no play), started in the middle
+/// of the gap.
+pub fn play(y: &[[f64; 3]], gap: &[f64; 3]) -> Vec<[f64; 3]> {
+    let mut ql = y.first().copied().unwrap_or([0.0; 3]);
+    y.iter()
+        .map(|row| {
+            for c in 0..3 {
+                let h = 0.5 * gap[c];
+                ql[c] = ql[c].clamp(row[c] - h, row[c] + h);
+            }
+            ql
+        })
+        .collect()
 }
 
 /// In replay, set the motor rows in contact to the motor side plus their play (`q_m + off`,
@@ -97,7 +113,7 @@ pub fn prescribe(model: &Model, drive: &Drive, g: &Gears, t: f64, q: &mut VecN, 
 /// and not moving into the gap stays in contact unless the gear would have to pull there
 /// (checked jointly, releasing the wrong-signed contacts until none is left).
 pub fn modes(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN, m: &mut MatN) -> Gears {
-    let bl = &pd.params.effects.backlash;
+    let gap = pd.params.effects.backlash.free_gap();
     let Drive::Replay(s) = drive else {
         return RIGID;
     };
@@ -105,10 +121,10 @@ pub fn modes(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: 
     let mut g = RIGID;
     let mut side = [0.0f64; 3];
     for (k, &p) in model.motor_idx.iter().enumerate() {
-        if bl.gap[k] == 0.0 {
+        if gap[k] == 0.0 {
             continue;
         }
-        let h = 0.5 * bl.gap[k];
+        let h = 0.5 * gap[k];
         let (x, xd) = (q[p] - qm[k], v[p] - vm[k]);
         let tol = flank_tol(h, qm[k]);
         // a link side that separates slower than this is still on its flank (the step's end
@@ -171,15 +187,15 @@ pub fn first_contact(model: &Model, pd: &ParamData, drive: &Drive, g: &Gears, t:
     let Drive::Replay(s) = drive else {
         return None;
     };
-    let bl = &pd.params.effects.backlash;
+    let gap = pd.params.effects.backlash.free_gap();
     let (qa, va, _) = s.eval(t);
     let (qb, vb, _) = s.eval(t + h);
     let mut first: Option<(f64, usize, f64)> = None;
     for (k, &p) in model.motor_idx.iter().enumerate() {
-        if !g.free[k] || bl.gap[k] == 0.0 {
+        if !g.free[k] || gap[k] == 0.0 {
             continue;
         }
-        let half = 0.5 * bl.gap[k];
+        let half = 0.5 * gap[k];
         let (x0, d0) = (start.0[p] - qa[k], start.1[p] - va[k]);
         let (x1, d1) = (end.0[p] - qb[k], end.1[p] - vb[k]);
         if x1.abs() < half - flank_tol(half, qb[k]) {
@@ -216,13 +232,13 @@ pub fn impacts(model: &Model, pd: &ParamData, drive: &Drive, g: &Gears, t: f64, 
     let Drive::Replay(s) = drive else {
         return;
     };
-    let bl = &pd.params.effects.backlash;
+    let gap = pd.params.effects.backlash.free_gap();
     let (qm, vm, _) = s.eval(t);
     for (k, &p) in model.motor_idx.iter().enumerate() {
-        if !g.free[k] || bl.gap[k] == 0.0 {
+        if !g.free[k] || gap[k] == 0.0 {
             continue;
         }
-        let h = 0.5 * bl.gap[k];
+        let h = 0.5 * gap[k];
         let x = q[p] - qm[k];
         if x.abs() < h - flank_tol(h, qm[k]) {
             continue;
@@ -240,7 +256,7 @@ pub fn impacts(model: &Model, pd: &ParamData, drive: &Drive, g: &Gears, t: f64, 
 #[allow(clippy::too_many_arguments)]
 pub fn hit(model: &Model, pd: &ParamData, g: &Gears, k: usize, side: f64, (qm, vm): (f64, f64), located: bool, q: &mut VecN, v: &mut VecN) {
     let p = model.motor_idx[k];
-    q[p] = qm + side * 0.5 * pd.params.effects.backlash.gap[k];
+    q[p] = qm + side * 0.5 * pd.params.effects.backlash.free_gap()[k];
     let closing = vm - v[p];
     let after = if side * closing < 0.0 {
         pd.params.effects.backlash.restitution[k] * closing
@@ -268,8 +284,8 @@ pub fn hit(model: &Model, pd: &ParamData, g: &Gears, k: usize, side: f64, (qm, v
 /// As [`rest_state`].
 pub fn rest(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result<State> {
     let st = rest_state(model, pd, t, qm)?;
-    let bl = &pd.params.effects.backlash;
-    if !bl.on() {
+    let gap = pd.params.effects.backlash.free_gap();
+    if gap == [0.0; 3] {
         return Ok(st);
     }
     let g = gravity_torque(model, pd, &st.q);
@@ -278,7 +294,7 @@ pub fn rest(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result<State
     for (k, &p) in model.motor_idx.iter().enumerate() {
         // the gear holds the link with τ_g = G_p: pushing forwards puts the link side behind
         if g[p].abs() > 1e-9 * scale.max(1e-12) {
-            ql[k] -= g[p].signum() * 0.5 * bl.gap[k];
+            ql[k] -= g[p].signum() * 0.5 * gap[k];
         }
     }
     rest_state(model, pd, t, ql)

@@ -16,7 +16,9 @@
 //!   in replay) and the link side of each motor joint, which becomes a degree of freedom of
 //!   its own: free inside the gap (with the gear's link-side `inertia`), in rigid unilateral
 //!   contact on a flank while the gear pushes, plastic impact when it reaches a flank
-//!   (`crate::backlash`).
+//!   (`crate::backlash`). With `held = 1` the link side is held inside the gap instead and
+//!   follows the play operator `q_l ← clamp(q_l, q_m − gap/2, q_m + gap/2)` of the encoder
+//!   angle (started centred), prescribed like a rigid gear.
 //! - `pressure_leak`: `p(t) = p₀ e^{−rate·t}` per link (t on the run's clock); k(p), c(p)
 //!   follow the table and `M_w = coef·p·r³` follows p.
 //! - `wrinkling`: bilinear spring per universal joint: with `s = k|δ|` (both axes) and
@@ -78,10 +80,14 @@ pub struct Backlash {
     pub inertia: [f64; 3],
     /// Coefficient of restitution of the gear's flanks [1] (0 = plastic impact).
     pub restitution: [f64; 3],
+    /// 1 = the link side is held inside the gap (its bearing's friction beats every load)
+    /// and only moves when a flank pushes it: a play operator on the encoder angle, started
+    /// in the middle of the gap; 0 = free inside the gap (the gear with play) [1].
+    pub held: [f64; 3],
 }
 impl Default for Backlash {
     fn default() -> Self {
-        Backlash { gap: [0.0; 3], inertia: [BACKLASH_INERTIA; 3], restitution: [0.0; 3] }
+        Backlash { gap: [0.0; 3], inertia: [BACKLASH_INERTIA; 3], restitution: [0.0; 3], held: [0.0; 3] }
     }
 }
 impl Backlash {
@@ -89,6 +95,18 @@ impl Backlash {
     #[inline]
     pub fn on(&self) -> bool {
         self.gap != [0.0; 3]
+    }
+
+    /// Gaps whose link side is free inside them (the gear with play, `crate::backlash`) [rad].
+    #[inline]
+    pub fn free_gap(&self) -> [f64; 3] {
+        std::array::from_fn(|k| if self.held[k] == 0.0 { self.gap[k] } else { 0.0 })
+    }
+
+    /// Gaps whose link side is held inside them (a play operator on the encoder) [rad].
+    #[inline]
+    pub fn held_gap(&self) -> [f64; 3] {
+        std::array::from_fn(|k| if self.held[k] != 0.0 { self.gap[k] } else { 0.0 })
     }
 }
 
@@ -308,6 +326,18 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
     p("backlash", "inertia", "kg·m²", 3, BACKLASH_INERTIA, 1e-4, 10.0, false, "link-side inertia of the gear about the motor axis, felt inside the gap"),
     p("backlash", "restitution", "1", 3, 0.0, 0.0, 0.95, false, "coefficient of restitution of the gear's flanks (0 = plastic impact)"),
     ParamSpec {
+        effect: "backlash",
+        name: "held",
+        unit: "1",
+        len: 3,
+        neutral: 0.0,
+        lo: 0.0,
+        hi: 1.0,
+        fit: false,
+        integer: true,
+        doc: "1 = the link side is held inside the gap and only moves when a flank pushes it (play operator on the encoder, started centred); 0 = free inside the gap",
+    },
+    ParamSpec {
         effect: "higher_bending_modes",
         name: "segments",
         unit: "1",
@@ -365,7 +395,7 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
 ];
 
 /// Number of registered parameters.
-pub const NPARAM: usize = 29;
+pub const NPARAM: usize = 30;
 
 /// Length of the flat effect vector.
 pub const NE: usize = {
@@ -400,6 +430,7 @@ impl Effects {
             &e.backlash.gap,
             &e.backlash.inertia,
             &e.backlash.restitution,
+            &e.backlash.held,
             &e.higher_bending_modes.segments,
             &e.higher_bending_modes.k_scale,
             &e.higher_bending_modes.elements,
@@ -435,6 +466,7 @@ impl Effects {
             &mut e.backlash.gap,
             &mut e.backlash.inertia,
             &mut e.backlash.restitution,
+            &mut e.backlash.held,
             &mut e.higher_bending_modes.segments,
             &mut e.higher_bending_modes.k_scale,
             &mut e.higher_bending_modes.elements,
@@ -517,7 +549,7 @@ impl Effects {
             // parameters that only shape an effect whose strength is neutral do not count
             let shaping = matches!(
                 (ps.effect, ps.name),
-                ("joint_friction", "v_s") | ("backlash", "inertia" | "restitution") | ("torsion", "c_t") | ("higher_bending_modes", "k_scale" | "e_pa" | "wall_m" | "nu" | "lambda_s" | "mu_per_s" | "shear")
+                ("joint_friction", "v_s") | ("backlash", "inertia" | "restitution" | "held") | ("torsion", "c_t") | ("higher_bending_modes", "k_scale" | "e_pa" | "wall_m" | "nu" | "lambda_s" | "mu_per_s" | "shear")
             );
             shaping || s.iter().all(|&x| x.to_bits() == ps.neutral.to_bits())
         })

@@ -123,7 +123,7 @@ pub fn check_step(model: &Model, pd: &ParamData, q: &VecN, replay: bool) -> Resu
     let mut free = model.free_joints(replay);
     if replay {
         // the link side of a gear with play is free inside its gap (crate::backlash)
-        let gap = pd.params.effects.backlash.gap;
+        let gap = pd.params.effects.backlash.free_gap();
         free.extend(model.motor_idx.iter().enumerate().filter(|&(k, _)| gap[k] != 0.0).map(|(_, &p)| p));
     }
     let h = model.options.dt;
@@ -396,13 +396,16 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
     Ok(OpenEnd { nsample, alarms, final_state: st })
 }
 
-/// The drive the physics sees under an encoder `sensor_delay` in replay: the true motor
-/// angle leads the encoder by the delay (`q_m(t) = q_enc(t + delay)`). Returns the drive
-/// and, when the `q*`/`dq*` channels must not be read from the physics (a delay, or
-/// `backlash`, where the chain holds the link side), the encoder spline for them.
+/// The drive the physics sees in replay under an encoder `sensor_delay` and a `backlash`
+/// whose link side is held in its gap: the true motor angle leads the encoder by the delay
+/// (`q_m(t) = q_enc(t + delay)`) and a held link side follows the play operator of it
+/// ([`crate::backlash::play`]). Returns the drive and, when the `q*`/`dq*` channels must
+/// not be read from the physics (a delay, or `backlash`, where the chain holds the link
+/// side), the encoder spline for them.
 fn effect_drive(model: &Model, pd: &ParamData, drive: &Drive) -> Result<(Drive, Option<Spline3>)> {
     let fx = &pd.params.effects;
     let gap = fx.backlash.gap;
+    let held = fx.backlash.held_gap();
     let delay = fx.sensor_delay.encoder;
     match drive {
         Drive::Torque(_) | Drive::Hold(_) if gap != [0.0; 3] => Err(Error::param(
@@ -410,11 +413,28 @@ fn effect_drive(model: &Model, pd: &ParamData, drive: &Drive) -> Result<(Drive, 
             format!("{gap:?}"),
             "backlash needs encoder replay in this version (torque drive has no motor-side state until the motoreducer model of the controller issue)",
         )),
-        Drive::Replay(_) if gap != [0.0; 3] && model.has_beam() => Err(Error::param(
+        Drive::Replay(_) if fx.backlash.free_gap() != [0.0; 3] && model.has_beam() => Err(Error::param(
             "effects.backlash.gap",
             format!("{gap:?}"),
-            "backlash is not available with beam links in this version (the articulated-body solver has no free motor rows): use PRBM links",
+            "backlash with a free link side is not available with beam links in this version (the articulated-body solver has no free motor rows): use PRBM links or held = 1",
         )),
+        Drive::Replay(s) if held != [0.0; 3] => {
+            // the play operator runs on the encoder spline at the physics steps (from the
+            // first sample): a take-up is placed to within a step, and each step of the
+            // integrator spans one piece of the played spline (a kink inside a step, as
+            // between the jittered stamps of a run, would cost RK4 its order)
+            let (t, _) = s.knots();
+            let (t0, t1) = (t[0], t[t.len() - 1]);
+            let h = model.options.dt;
+            let n = ((t1 - t0) / h).floor() as usize;
+            let mut tg: Vec<f64> = (0..=n).map(|k| t0 + k as f64 * h).collect();
+            if t1 - tg[n] > 1e-9 * h {
+                tg.push(t1);
+            }
+            let yg: Vec<[f64; 3]> = tg.iter().map(|&x| s.eval(x).0).collect();
+            let ts: Vec<f64> = tg.iter().map(|&x| x - delay).collect();
+            Ok((Drive::Replay(Spline3::new(&ts, &crate::backlash::play(&yg, &held))?), Some(s.clone())))
+        }
         Drive::Replay(s) if delay != 0.0 => {
             let (t, y) = s.knots();
             let ts: Vec<f64> = t.iter().map(|&x| x - delay).collect();

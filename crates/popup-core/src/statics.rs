@@ -163,7 +163,7 @@ pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with
     // a free motor row with play is the link side of its gear: the gear's link-side inertia
     // replaces the motor's armature (crate::backlash)
     for (k, &p) in model.motor_idx.iter().enumerate() {
-        if pd.params.effects.backlash.gap[k] != 0.0 && free.contains(&p) {
+        if pd.params.effects.backlash.free_gap()[k] != 0.0 && free.contains(&p) {
             mm[(p, p)] += pd.params.effects.backlash.inertia[k] - model.armature[p];
         }
     }

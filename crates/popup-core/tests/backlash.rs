@@ -226,3 +226,80 @@ fn backlash_runs_are_deterministic_and_torque_drive_and_beam_links_are_refused()
     let e = run(&mb, &pd(&mb, fx), &cfg).unwrap_err();
     assert!(e.to_string().contains("beam links"), "{e}");
 }
+
+/// The play operator's output at time t for a motor angle qm(t) that rises from 0 to its
+/// peak 0.3 at t = 0.5 and falls after (`0.3 sin(π t)` on [0, 1.5]) and a gap `2h`, link
+/// side started centred, written out piecewise: taken up when the motor passes h, dragged
+/// on the lower flank to the peak, held there while the motor comes back 2h, then dragged
+/// on the upper flank.
+fn played(t: f64, qm: f64, h: f64) -> f64 {
+    if t <= 0.5 {
+        (qm - h).max(0.0)
+    } else if qm >= 0.3 - 2.0 * h {
+        0.3 - h
+    } else {
+        qm + h
+    }
+}
+
+/// The played angles of the encoder spline `enc` on the grid of step `dt`: what the
+/// engine's drive passes through.
+fn played_grid(enc: &Spline3, dt: f64, h: f64) -> (Vec<f64>, Vec<[f64; 3]>) {
+    let n = (1.5 / dt).round() as usize;
+    let t: Vec<f64> = (0..=n).map(|k| k as f64 * dt).collect();
+    let y = t
+        .iter()
+        .map(|&t| {
+            let qm = enc.eval(t).0;
+            [played(t, qm[0], h), qm[1], qm[2]]
+        })
+        .collect();
+    (t, y)
+}
+
+#[test]
+fn a_held_link_side_follows_the_play_operator() {
+    // joint 1 (no gravity moment) swings up and back with a held gap: the run is the rigid
+    // run driven by the play operator's output (played at the engine's steps), while q1
+    // reads the encoder
+    let m = model();
+    let h = 0.025;
+    let t: Vec<f64> = (0..=750).map(|k| k as f64 * 2e-3).collect();
+    let y: Vec<[f64; 3]> = t.iter().map(|&t| [0.3 * (PI * t).sin(), -FRAC_PI_2 + 0.6, 0.4]).collect();
+    let mut fx = Effects::default();
+    fx.backlash.gap = [2.0 * h, 0.0, 0.0];
+    fx.backlash.held = [1.0, 0.0, 0.0];
+    let a = replay(&m, fx, &t, &y);
+    let enc = Spline3::new(&t, &y).unwrap();
+    let (tg, yl) = played_grid(&enc, m.options.dt, h);
+    let b = replay(&m, Effects::default(), &tg, &yl);
+    assert_eq!(col(&a, "q1"), y.iter().map(|r| r[0]).collect::<Vec<_>>());
+    for ch in ["ee_x", "ee_y", "ee_z", "imu2_ay", "tau1", "d11"] {
+        let d = max_abs_diff(&a, &b, ch);
+        let scale = col(&b, ch).iter().map(|x| x.abs()).fold(0.0, f64::max).max(1e-3);
+        assert!(d < 1e-9 * scale, "{ch}: {d:e} (scale {scale})");
+    }
+    // a free link side does something else: it coasts ahead while the motor brakes
+    fx.backlash.held = [0.0; 3];
+    let c = replay(&m, fx, &t, &y);
+    assert!(max_abs_diff(&a, &c, "ee_y") > 0.1 * h, "held and free gears must differ");
+    // and a held gap needs no free row, so beam links take it
+    fx.backlash.held = [1.0, 0.0, 0.0];
+    let mut spec = ArmSpec::popup_lab();
+    spec.effects.higher_bending_modes.elements = [2.0, 0.0];
+    let mb = Model::compile(&spec, Options { dt: 2e-4, ..Options::default() }).unwrap();
+    let (tb, ylb) = played_grid(&enc, mb.options.dt, h);
+    let ab = replay(&mb, fx, &t, &y);
+    let bb = replay(&mb, Effects::default(), &tb, &ylb);
+    assert!(max_abs_diff(&ab, &bb, "ee_y") < 1e-9, "beam links with a held gap");
+}
+
+#[test]
+fn held_is_a_whole_number_and_neutral_without_a_gap() {
+    let mut fx = Effects::default();
+    fx.backlash.held = [0.5, 0.0, 0.0];
+    let e = fx.validate().unwrap_err();
+    assert!(e.to_string().contains("held"), "{e}");
+    fx.backlash.held = [1.0; 3];
+    assert!(fx.is_neutral("backlash"));
+}
