@@ -22,6 +22,7 @@ interrupted benchmark resumes with ``--resume``.
     python benchmarks/bench_diagnosis_families.py --engine both --n 1            # ~25 runs
     python benchmarks/bench_diagnosis_families.py --engine mujoco --effects joint_friction,payload_mass --n 2
     python benchmarks/bench_diagnosis_families.py --generate-only --n 4          # just the runs
+    python benchmarks/bench_diagnosis_families.py --report-only --out DIR        # the tables of what DIR has
 
 Prints a table and writes ``OUT/summary.json``. Asserts nothing.
 """
@@ -278,9 +279,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per diagnosis (default 1800)")
     ap.add_argument("--resume", action="store_true", help="reuse runs and results already in --out")
     ap.add_argument("--generate-only", action="store_true", help="generate the runs, diagnose nothing")
+    ap.add_argument("--report-only", action="store_true", help="the tables from the results already in --out (runs without one are left out)")
     ap.add_argument("--diagnose-args", default="", help="extra arguments for popup diagnose (one string, split on spaces)")
     a = ap.parse_args(argv)
 
+    if a.report_only:
+        a.resume = True
     engines = ["popup", "mujoco"] if a.engine == "both" else [a.engine]
     out = Path(a.out)
     (out / "results").mkdir(parents=True, exist_ok=True)
@@ -343,6 +347,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return row
 
     rows: List[Dict[str, Any]] = []
+    if a.report_only:
+        have = [r for r in runs if (out / "results" / f"{r[0].name}.json").is_file()]
+        print(f"report only: {len(have)} of {len(runs)} runs have a result\n")
+        runs = have
     if a.jobs > 1:
         with ThreadPoolExecutor(max_workers=a.jobs) as ex:
             rows = list(ex.map(one, runs))
