@@ -284,7 +284,8 @@ def _diagnosed(path, truth):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("engine,kind", [("mujoco", "payload_mass"), ("mujoco", "joint_friction"), ("popup", "joint_friction")])
+@pytest.mark.parametrize("engine,kind", [("mujoco", "payload_mass"), ("mujoco", "joint_friction"), ("popup", "joint_friction"),
+                                         ("mujoco", "backlash_held")])
 def test_diagnosis_finds_a_hidden_effect_well_above_the_noise(engine, kind, tmp_path):
     if engine == "mujoco":
         pytest.importorskip("mujoco")
