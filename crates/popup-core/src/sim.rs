@@ -419,21 +419,12 @@ fn effect_drive(model: &Model, pd: &ParamData, drive: &Drive) -> Result<(Drive, 
             "backlash with a free link side is not available with beam links in this version (the articulated-body solver has no free motor rows): use PRBM links or held = 1",
         )),
         Drive::Replay(s) if held != [0.0; 3] => {
-            // the play operator runs on the encoder spline at the physics steps (from the
-            // first sample): a take-up is placed to within a step, and each step of the
-            // integrator spans one piece of the played spline (a kink inside a step, as
-            // between the jittered stamps of a run, would cost RK4 its order)
-            let (t, _) = s.knots();
-            let (t0, t1) = (t[0], t[t.len() - 1]);
-            let h = model.options.dt;
-            let n = ((t1 - t0) / h).floor() as usize;
-            let mut tg: Vec<f64> = (0..=n).map(|k| t0 + k as f64 * h).collect();
-            if t1 - tg[n] > 1e-9 * h {
-                tg.push(t1);
-            }
-            let yg: Vec<[f64; 3]> = tg.iter().map(|&x| s.eval(x).0).collect();
-            let ts: Vec<f64> = tg.iter().map(|&x| x - delay).collect();
-            Ok((Drive::Replay(Spline3::new(&ts, &crate::backlash::play(&yg, &held))?), Some(s.clone())))
+            // played at the encoder samples: a joint without a held gap keeps its spline
+            // exactly, and a held gap going to 0 is the rigid gear (a finer played grid
+            // re-interpolates every joint, which a fit then exploits as a smoother)
+            let (t, y) = s.knots();
+            let ts: Vec<f64> = t.iter().map(|&x| x - delay).collect();
+            Ok((Drive::Replay(Spline3::new(&ts, &crate::backlash::play(y, &held))?), Some(s.clone())))
         }
         Drive::Replay(s) if delay != 0.0 => {
             let (t, y) = s.knots();
