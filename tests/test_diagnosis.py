@@ -19,7 +19,7 @@ import pytest
 
 import popup
 from popup import effects as fx
-from popup.diagnosis import model_error
+from popup.diagnosis import AT_FLOOR, FLOOR_MULTIPLE, JOINT_TOP, model_error
 
 #: The hidden effects and their true parameters (realistic magnitudes).
 HIDDEN = {
@@ -215,7 +215,14 @@ def test_two_hidden_effects_are_found_in_two_rounds(nominal, traj, tmp_path_fact
     errs = [s.error for s in h.steps]
     assert errs[1] < errs[0] and errs[2] < errs[1]
     assert errs[-1] < 0.25 * errs[0]
-    assert h.diagnoses[-1].significant == []
+    # both found, every channel at its noise floor: the loop stops without a third round
+    assert max(h.steps[-1].channel_error.values()) <= FLOOR_MULTIPLE and errs[-1] <= AT_FLOOR, h.steps[-1].channel_error
+    assert len(h.diagnoses) == 2 and "nothing more was tried" in h.conclusion, h.conclusion
+    # round 2 screens every candidate with the first effect held, then refits the best
+    # JOINT_TOP jointly with it (the rest keep their screened fit)
+    d2 = h.diagnoses[1]
+    joint = [s for s in d2.suspects if "refitted with" in s.message or "joint refit" in s.message]
+    assert 1 <= len(joint) <= JOINT_TOP and d2.suspects[0] in joint, [(s.effect, s.message) for s in d2.suspects]
     d = h.to_dict()
     assert [x["effects"] for x in d["history"]][0] == []
     assert d["history"][-1]["error"] == pytest.approx(errs[-1])

@@ -96,6 +96,8 @@ __all__ = [
     "STABILITY_MARGIN",
     "AT_FLOOR",
     "VARIANTS",
+    "JOINT_TOP",
+    "FLOOR_MULTIPLE",
 ]
 
 SCORE_THRESHOLD = 10.0
@@ -107,6 +109,17 @@ STABILITY_MARGIN = 0.5
 AT_FLOOR = 0.3
 """Systematic error [noise units] below which a model is said to be at the noise floor
 (the total error within 5 % of the noise: sqrt(1 + 0.3²) = 1.044)."""
+
+JOINT_TOP = 3
+"""In a round with effects already added, the number of best-screened candidates refitted
+jointly with them (the others keep their screened fit, earlier effects held)."""
+
+FLOOR_MULTIPLE = 1.1
+"""After an effect was added, :func:`improve` stops when the systematic error is at most
+:data:`AT_FLOOR` and every channel is within this multiple of its noise (a systematic part of
+at most 0.46 σ in any channel). The noise floors are themselves estimated from the run
+(coloured noise, a few % uncertain), so effects that would take such a model from, say,
+0.15 to 0.08 noise units are fitting that uncertainty, not physics."""
 
 #: Effects that move a lightly damped resonance: fitted on a short horizon first (extra start).
 _SHORT_FIRST = {"higher_bending_modes", "torsion", "payload_mass", "wrinkling", "pressure_leak", "air_drag"}
@@ -665,15 +678,21 @@ class _Fitted:
 
 def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str, Any]], only: Optional[Sequence[str]], start: Optional[Dict[str, List[float]]],
                    extra_seeds: Optional[List[Dict[str, Any]]], max_iter: int, variant: str = "",
-                   also: Optional[List[Tuple[fx.EffectParam, int]]] = None, stiffest: Optional[Dict[str, Any]] = None) -> Tuple[_Fitted, str]:
+                   also: Optional[List[Tuple[fx.EffectParam, int]]] = None, stiffest: Optional[Dict[str, Any]] = None,
+                   dt: Optional[float] = None, seeds: bool = True) -> Tuple[_Fitted, str]:
+    """Fit one candidate (``structure``, the names ``only`` or every fitted one) from
+    ``start`` and the effect's seeds (``seeds=False``: from ``start`` alone), with the
+    entries of ``also`` refitted jointly; ``dt``: the step to use (default: from the
+    structure's stability limit at ``stiffest``)."""
     model = prob.model
     m = model
     note = ""
     pb, z_base = prob, prob.residuals(prob.nominal_simulation())
     if structure is not None:
         m = model.with_effect(name, **structure)
-        check = m.with_effect(name, **(stiffest if stiffest is not None else _STIFFEST.get(name, {})))
-        dt = _step_for(prob, m, check)
+        if dt is None:
+            check = m.with_effect(name, **(stiffest if stiffest is not None else _STIFFEST.get(name, {})))
+            dt = _step_for(prob, m, check)
         if dt < model.dt * (1 - 1e-12):
             m = m.with_dt(dt)
             pb = prob.with_model(model.with_dt(dt))
@@ -693,7 +712,7 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
                 if i < len(keep):
                     flat[sl.start + i] = keep[i]
     x0 = np.array([flat[q.offset + i] for q, i in free]) if start else _x0(p, free, flat)
-    cands = _candidates(name, p, free, flat, x0, extra_seeds)
+    cands = _candidates(name, p, free, flat, x0, extra_seeds) if seeds else [x0]
     # the effects added in earlier rounds are refitted with the candidate (forward
     # selection with refit: an earlier fit biased by this effect's absence is corrected)
     others = [pi for pi in (also or []) if pi[0].effect != name]
@@ -701,7 +720,7 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
     cands = [np.concatenate([c, cur]) for c in cands]
     free_all = free + others
     iters = max(max_iter, _MIN_ITER.get(name, 0))
-    if name in _SHORT_FIRST:
+    if name in _SHORT_FIRST and seeds:
         # a lightly damped response drifts out of phase over a long run, which makes the
         # full-run objective a needle around the truth: fit on a short horizon first (a wide
         # basin) and offer its optimum as one more start
@@ -753,6 +772,29 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
         else:
             notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f})")
     return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
+
+
+def _refit_jointly(prob: ReplayProblem, s: Suspect, ev: Dict[str, Any], max_iter: int, also: List[Tuple[fx.EffectParam, int]]) -> Suspect:
+    """The screened candidate ``s`` (fitted with the earlier effects held) refitted with
+    them (``also``): its law (variant), step and fitted names, from its screened optimum."""
+    n0 = prob.nfev
+    var = next((v for v in VARIANTS.get(s.effect, []) if v["name"] == s.variant), None) if s.variant else None
+    struct = dict(_STRUCTURE.get(s.effect) or {})
+    struct.update((var or {}).get("structure") or {})
+    start = {k: list(s.params[k]) for k in s.fitted if k in s.params}
+    try:
+        fitted, _ = _fit_candidate(prob, s.effect, struct or None, list(s.fitted) or None, start, None, max_iter, variant=s.variant,
+                                   also=also, dt=s.dt, seeds=False)
+    except Exception as e:  # noqa: BLE001 - the screened fit stands
+        s.message = "; ".join(x for x in (s.message, f"joint refit failed: {type(e).__name__}: {e}") if x)
+        return s
+    j = fitted.suspect(ev, s.n_rollouts + prob.nfev - n0, s.message)
+    if j.score >= s.score:
+        j.message = "; ".join(x for x in (s.message, f"refitted with {', '.join(sorted({p.effect for p, _ in also}))} (score {s.score:.1f} → {j.score:.1f})") if x)
+        return j
+    s.n_rollouts = j.n_rollouts
+    s.message = "; ".join(x for x in (s.message, f"joint refit scored lower ({j.score:.1f}): the screened fit is kept") if x)
+    return s
 
 
 # ---------------------------------------------------------------------------- API
@@ -807,15 +849,24 @@ def diagnose(
     also = [pi for e, ps in (refit or {}).items() for pi in est.free_params(e, list(ps) or None)]
     todo = [n for n in names if n not in have]
     suspects: List[Suspect] = []
-    extra = 0
+    evs: Dict[str, Dict[str, Any]] = {}
+    # with earlier effects to refit, every candidate is first screened with them held, and
+    # only the JOINT_TOP best are refitted jointly (the refit's extra Jacobian columns are
+    # most of a round's cost, and the ranking's tail does not need them)
+    total = len(todo) + (min(JOINT_TOP, len(todo)) if also else 0)
     for i, name in enumerate(todo):
         if progress is not None:
-            progress({"effect": name, "done": i, "total": len(todo)})
-        ev = _evidence(name, cmp, prob)
-        s = _try_effect(prob, name, ev, max_iter, also)
-        extra += s.n_rollouts
-        suspects.append(s)
+            progress({"effect": name, "done": i, "total": total})
+        evs[name] = _evidence(name, cmp, prob)
+        suspects.append(_try_effect(prob, name, evs[name], max_iter, None))
     suspects.sort(key=_rank_key)
+    if also:
+        for i, s in enumerate(suspects[:JOINT_TOP]):
+            if progress is not None:
+                progress({"effect": f"{s.effect} (joint refit)", "done": len(todo) + i, "total": total})
+            if s.tested and math.isfinite(s.score):
+                suspects[i] = _refit_jointly(prob, s, evs[s.effect], max_iter, also)
+        suspects.sort(key=_rank_key)
     white = bool(cmp.whiteness["is_white"].all())
     d = Diagnosis(
         suspects=suspects,
@@ -937,7 +988,7 @@ def improve(
                     steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
                                              validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e))
             remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
-            if not remaining:
+            if not remaining or _at_floor(steps[-1]):
                 break
             d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, refit=fitted_params)
             diags.append(d)
@@ -949,6 +1000,14 @@ def improve(
     h.conclusion = _conclude(h, max_rounds)
     h.seconds = time.perf_counter() - t_start
     return h
+
+
+def _at_floor(st: HistoryStep) -> bool:
+    """Whether a model is at the noise floor: systematic error at most :data:`AT_FLOOR` and
+    every channel within :data:`FLOOR_MULTIPLE` of its noise. Nothing more is added then:
+    what is left is below what the run's estimated noise floors resolve."""
+    per = [v for v in st.channel_error.values() if math.isfinite(v)]
+    return bool(st.error <= AT_FLOOR and per and max(per) <= FLOOR_MULTIPLE)
 
 
 def _still_needed(prob: ReplayProblem, effect: str, params: Sequence[str]) -> bool:
@@ -1027,6 +1086,8 @@ def _conclude(h: History, max_rounds: int) -> str:
     n_added = sum(1 for st in h.steps[1:] if not st.removed)
     if last.error <= AT_FLOOR:
         left = f"what is left is at the noise floor (systematic error {last.error:.3g} noise units)"
+        if parts and _at_floor(last):
+            left += f", every channel within {FLOOR_MULTIPLE:g}× its noise: nothing more was tried"
         if not parts:
             left = f"the model is at the noise floor (systematic error {last.error:.3g} noise units): nothing significant is missing"
     else:
