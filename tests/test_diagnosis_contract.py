@@ -84,6 +84,9 @@ def test_a_failing_round_keeps_what_finished(nominal, friction_run, monkeypatch,
         return orig(*a, **kw)
 
     monkeypatch.setattr(dg, "diagnose", flaky)
+    # friction alone brings this run to its noise floor, where the loop stops: switch that
+    # stop off so that a second round runs (and fails)
+    monkeypatch.setattr(dg, "FLOOR_MULTIPLE", 0.0)
     h = dg.improve(nominal, friction_run, effects=["joint_friction", "payload_mass"], max_rounds=3)
     assert not h.complete and "round 2 failed: StepTooLargeError" in h.error
     assert h.effects == ["joint_friction"] and len(h.steps) == 2 and len(h.diagnoses) == 1
