@@ -121,11 +121,12 @@ at most 0.46 σ in any channel). The noise floors are themselves estimated from 
 (coloured noise, a few % uncertain), so effects that would take such a model from, say,
 0.15 to 0.08 noise units are fitting that uncertainty, not physics."""
 
-#: Effects that move a lightly damped resonance: fitted on a short horizon first (extra start).
-_SHORT_FIRST = {"higher_bending_modes", "torsion", "payload_mass", "wrinkling", "pressure_leak", "air_drag"}
+#: Effects that move a lightly damped resonance (or a link side rattling in its gap): fitted on
+#: a short horizon first, then on doubled horizons from that optimum (an extra start).
+_SHORT_FIRST = {"higher_bending_modes", "torsion", "payload_mass", "wrinkling", "pressure_leak", "air_drag", "backlash"}
 SHORT_HORIZON_S = 2.5
 """Length [s] of the short horizon (at least 20 % of the run) of the first fit of an effect
-that moves a resonance."""
+that moves a resonance; the continuation then doubles it until the run's length."""
 
 #: Effects whose fit needs more iterations than ``max_iter`` (coupled, lightly damped modes).
 _MIN_ITER: Dict[str, int] = {"torsion": 40, "higher_bending_modes": 25, "wrinkling": 20}
@@ -721,14 +722,21 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
     free_all = free + others
     iters = max(max_iter, _MIN_ITER.get(name, 0))
     if name in _SHORT_FIRST and seeds:
-        # a lightly damped response drifts out of phase over a long run, which makes the
-        # full-run objective a needle around the truth: fit on a short horizon first (a wide
-        # basin) and offer its optimum as one more start
+        # a lightly damped response (or a link side crossing its gap) drifts out of phase
+        # over a long run, which makes the full-run objective a needle around the truth:
+        # fit on a short horizon first (a wide basin), then on horizons doubled in turn,
+        # each from the last optimum (continuation), and offer the result as one more start
         t0, t1 = float(p.time[0]), float(p.time[-1])
-        ph = p.with_horizon(t0 + max(SHORT_HORIZON_S, 0.2 * (t1 - t0)))
+        h = max(SHORT_HORIZON_S, 0.2 * (t1 - t0))
+        ph = p.with_horizon(t0 + h)
         if ph is not p:
             xh, _ = est.best_start(ph, free_all, flat, cands)
-            cands.append(est.fit(ph, flat, free_all, xh, iters).x)
+            xh = est.fit(ph, flat, free_all, xh, iters).x
+            while 2.0 * h < t1 - t0:
+                h *= 2.0
+                ph = p.with_horizon(t0 + h)
+                xh = est.fit(ph, flat, free_all, xh, iters, mask=p.train[p.time <= t0 + h]).x
+            cands.append(xh)
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
     return _Fitted(name, variant, p, z_base, free_all, out, k=len(free)), note
