@@ -124,6 +124,10 @@ at most 0.46 σ in any channel). The noise floors are themselves estimated from 
 #: Effects that move a lightly damped resonance (or a link side rattling in its gap): fitted on
 #: a short horizon first, then on doubled horizons from that optimum (an extra start).
 _SHORT_FIRST = {"higher_bending_modes", "torsion", "payload_mass", "wrinkling", "pressure_leak", "air_drag", "backlash"}
+#: Effects whose per-joint seeded parameters are also swept joint by joint (on the short horizon).
+_COORDINATE_SEEDS = {"backlash"}
+COORDINATE_STEP = 1.03
+"""Ratio between neighbouring values of the joint-by-joint seed sweep (``_COORDINATE_SEEDS``)."""
 SHORT_HORIZON_S = 2.5
 """Length [s] of the short horizon (at least 20 % of the run) of the first fit of an effect
 that moves a resonance; the continuation then doubles it until the run's length."""
@@ -731,6 +735,8 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         ph = p.with_horizon(t0 + h)
         if ph is not p:
             xh, _ = est.best_start(ph, free_all, flat, cands)
+            if name in _COORDINATE_SEEDS:
+                xh = _coordinate_seeds(ph, name, free_all, flat, xh)
             xh = est.fit(ph, flat, free_all, xh, iters).x
             while 2.0 * h < t1 - t0:
                 h *= 2.0
@@ -740,6 +746,31 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
     return _Fitted(name, variant, p, z_base, free_all, out, k=len(free)), note
+
+
+def _coordinate_seeds(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """One sweep over the entries of ``name``'s seeded parameters: each entry in turn set to
+    every value of a fine log grid over its seeds' range (the others at the best so far), the
+    best kept (one batched rollout per entry). Seeds that move every joint together miss
+    unequal gaps."""
+    seen: Dict[str, List[float]] = {}
+    for seed in est.SEEDS.get(name, []):
+        for k, v in seed.items():
+            seen.setdefault(k, []).extend(np.atleast_1d(np.asarray(v, dtype=float)).tolist())
+    # a log grid COORDINATE_STEP apart over the seeds' range: a link side floating in its
+    # gap makes the objective a needle a few % wide in that gap, even on the short horizon
+    grid = {k: np.exp(np.arange(math.log(min(v)), math.log(max(v)) + 1e-9, math.log(COORDINATE_STEP))).tolist() for k, v in seen.items() if min(v) > 0}
+    x = np.asarray(x, dtype=float).copy()
+    for j, (q, _) in enumerate(free):
+        if q.effect != name or q.name not in grid:
+            continue
+        cands = [x]
+        for v in grid[q.name]:
+            c = x.copy()
+            c[j] = min(max(v, q.lower), q.upper)
+            cands.append(c)
+        x, _ = est.best_start(prob, free, flat, cands)
+    return x
 
 
 def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int, also: Optional[List[Tuple[fx.EffectParam, int]]] = None) -> Suspect:
