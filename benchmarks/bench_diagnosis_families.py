@@ -23,6 +23,11 @@ interrupted benchmark resumes with ``--resume``.
     python benchmarks/bench_diagnosis_families.py --engine mujoco --effects joint_friction,payload_mass --n 2
     python benchmarks/bench_diagnosis_families.py --generate-only --n 4          # just the runs
     python benchmarks/bench_diagnosis_families.py --report-only --out DIR        # the tables of what DIR has
+    python benchmarks/bench_diagnosis_families.py --styles trapezoid --duration 20 --n 2   # other trajectories, 20 s runs
+
+Each family cycles its runs over the excitation styles (``families.STYLES``: the lab plan of
+min-jerk moves, reversals, chirp and sweep; trapezoidal-velocity point-to-point moves; a
+Schroeder multisine on every joint), so that no family is one kind of trajectory.
 
 Prints a table and writes ``OUT/summary.json``. Asserts nothing.
 """
@@ -263,6 +268,11 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
             extra = f"   [nothing added {na}/{len(done)}, says outside the library {so}/{len(done)}]"
         lines.append(f"{CRITERION[kind]:<64} {ok}/{len(done)} ({len(g) - len(done)} failed){extra}")
         counts[kind] = {"ok": ok, "classified": len(done), "failed": len(g) - len(done)}
+    eff = [r for r in rs if r["outcome"]["kind"] == "effect" and r["outcome"]["ok"] is not None]
+    by = {st: [r for r in eff if r["truth"].get("style", "lab") == st] for st in F.STYLES}
+    if eff:
+        lines.append("(a) by excitation style: " + ", ".join(f"{st} {sum(1 for r in g if r['outcome']['ok'])}/{len(g)}" for st, g in by.items() if g))
+        counts["effect_by_style"] = {st: [sum(1 for r in g if r["outcome"]["ok"]), len(g)] for st, g in by.items() if g}
     return "\n".join(lines), {"families": summary, "counts": counts}
 
 
@@ -280,6 +290,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--resume", action="store_true", help="reuse runs and results already in --out")
     ap.add_argument("--generate-only", action="store_true", help="generate the runs, diagnose nothing")
     ap.add_argument("--report-only", action="store_true", help="the tables from the results already in --out (runs without one are left out)")
+    ap.add_argument("--styles", default=",".join(F.STYLES),
+                    help=f"excitation styles cycled over the runs (comma-separated, of {', '.join(F.STYLES)}; default all)")
+    ap.add_argument("--duration", type=float, default=None, help="every run this long [s] (default: drawn, 10-14 s)")
     ap.add_argument("--diagnose-args", default="", help="extra arguments for popup diagnose (one string, split on spaces)")
     a = ap.parse_args(argv)
 
@@ -290,6 +303,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     (out / "results").mkdir(parents=True, exist_ok=True)
     extra = [x for x in a.diagnose_args.split() if x]
     kinds_extra = [k.strip() for k in a.kinds.split(",") if k.strip()]
+    styles = [x.strip() for x in a.styles.split(",") if x.strip()]
+    for st in styles:
+        if st not in F.STYLES:
+            ap.error(f"--styles: {st!r} is not one of {', '.join(F.STYLES)}")
+    ov: Dict[str, Any] = {"styles": styles}
+    if a.duration is not None:
+        if not a.duration >= 2.0:
+            ap.error(f"--duration: {a.duration} s; expected at least 2 s")
+        ov["duration"] = float(a.duration)
     plan: List[Tuple[str, str]] = []
     for eng in engines:
         effs = [e.strip() for e in a.effects.split(",")] if a.effects else F.EFFECT_FAMILIES[eng]
@@ -309,13 +331,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     t0 = time.perf_counter()
     runs: List[Tuple[Path, Dict[str, Any]]] = []
     for eng, kind in plan:
-        specs = F.family_specs(kind, eng, a.n, a.seed)
+        specs = F.family_specs(kind, eng, a.n, a.seed, **ov)
         have = [(out / sp.name) for sp in specs]
         if a.resume and all((p / "measurements.csv").is_file() for p in have):
             runs += [(p, F.read_truth(p)) for p in have]
             continue
         tg = time.perf_counter()
-        got = F.make_family(kind, eng, a.n, a.seed, out, jobs=a.jobs)
+        got = F.make_family(kind, eng, a.n, a.seed, out, jobs=a.jobs, **ov)
         print(f"generated {len(got)} {eng}/{kind} run(s) in {time.perf_counter() - tg:.1f} s", flush=True)
         runs += got
     print(f"{len(runs)} runs in {out} ({time.perf_counter() - t0:.0f} s)\n", flush=True)

@@ -91,6 +91,8 @@ __all__ = [
     "FAMILY_KINDS",
     "RunSpec",
     "excitation",
+    "excitation_of",
+    "STYLES",
     "make_stamps",
     "simulate_popup",
     "MujocoArm",
@@ -242,6 +244,142 @@ def excitation(duration: float, seed: int, *, amplitude: float = 1.0, pose0: Opt
     return Excitation(duration=float(duration), times=np.array(times), poses=np.array(poses), osc=osc, plan=[str(b) for b in order])
 
 
+#: Excitation styles (:func:`excitation_of`): ``lab`` (:func:`excitation`: min-jerk moves,
+#: reversals, a chirp, a sweep), ``trapezoid`` (:class:`TrapezoidMoves`: point-to-point moves
+#: with trapezoidal velocity profiles, as a motion controller plans them) and ``multisine``
+#: (:class:`MultiSine`: a Schroeder-phased multisine on every joint at once).
+STYLES = ("lab", "trapezoid", "multisine")
+
+
+@dataclass
+class TrapezoidMoves:
+    """Point-to-point moves as an industrial motion controller plans them: every joint on
+    a trapezoidal velocity profile (acceleration steps of ``a_max`` [rad/s²], cruise at
+    ``v_max`` [rad/s]), the joints synchronised to the slowest, dwells of 0.3-1.2 s
+    between moves (ring-down); moves, there-and-back moves (velocity reversals) and q1
+    alone there and back (out of plane). C1 only: q̈ jumps at each phase change."""
+
+    duration: float
+    p0: np.ndarray
+    moves: List[Tuple[float, np.ndarray, np.ndarray, float, float]]  # (t0, start, delta, t_acc, t_cruise)
+    a_max: float
+    plan: List[str] = field(default_factory=list)
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        q = np.tile(self.p0, (t.size, 1))
+        for t0, start, delta, ta, tc in self.moves:
+            T = 2 * ta + tc
+            s = np.clip(t - t0, 0.0, T)
+            # the path parameter u in [0, 1]: accelerate, cruise, decelerate (u'' = ±1/(ta (ta + tc)))
+            a = 1.0 / (ta * (ta + tc))
+            u = np.where(s < ta, 0.5 * a * s**2,
+                         np.where(s < ta + tc, 0.5 * a * ta**2 + a * ta * (s - ta),
+                                  1.0 - 0.5 * a * np.maximum(T - s, 0.0) ** 2))
+            on = t >= t0
+            q[on] = start[None, :] + delta[None, :] * u[on, None]
+        return q
+
+
+def trapezoid_moves(duration: float, seed: int, *, amplitude: float = 1.0, wrinkle: bool = False) -> TrapezoidMoves:
+    """A :class:`TrapezoidMoves` experiment of ``duration`` [s] drawn from ``seed``."""
+    rng = _rng(seed, "trapezoid")
+    lo, hi = Q_LO.copy(), Q_HI.copy()
+    if wrinkle:
+        lo[1], hi[1] = -0.35, 0.25
+        lo[2], hi[2] = -0.4, 0.4
+    a_max = float(rng.uniform(2.5, 6.0)) * max(amplitude, 0.5)
+    v_max = float(rng.uniform(0.6, 1.4)) * amplitude
+    p0 = rng.uniform(lo * 0.7, hi * 0.7)
+    pose, t, moves, plan = p0.copy(), 0.5, [], []
+
+    def profile(d: float) -> Tuple[float, float]:
+        ta = v_max / a_max
+        if d < v_max * ta:  # a triangle: never reaches v_max
+            return math.sqrt(d / a_max), 0.0
+        return ta, (d - v_max * ta) / v_max
+
+    while t < duration - 1.5:
+        kind = str(rng.choice(["move", "there_and_back", "q1_there_and_back"]))
+        if kind == "q1_there_and_back":
+            delta = np.array([rng.uniform(0.4, 0.9) * amplitude * rng.choice([-1.0, 1.0]), 0.0, 0.0])
+        elif kind == "there_and_back":
+            delta = 0.6 * amplitude * rng.uniform([-0.7, -0.45, -0.7], [0.7, 0.45, 0.7])
+        else:
+            delta = amplitude * rng.uniform([-0.7, -0.45, -0.7], [0.7, 0.45, 0.7])
+        delta = np.clip(pose + delta, lo, hi) - pose
+        d = float(np.max(np.abs(delta)))
+        if d < 1e-3:
+            continue
+        ta, tc = profile(d)
+        legs = [delta] if kind == "move" else [delta, -delta]
+        dwell = [float(rng.uniform(0.3, 1.2)) for _ in legs]
+        if t + len(legs) * (2 * ta + tc) + sum(dwell[:-1]) > duration - 0.8:
+            break
+        for leg, dw in zip(legs, dwell):
+            moves.append((t, pose.copy(), leg, ta, tc))
+            pose = pose + leg
+            t += 2 * ta + tc + dw
+        plan.append(kind)
+    return TrapezoidMoves(duration=float(duration), p0=p0, moves=moves, a_max=a_max, plan=plan)
+
+
+@dataclass
+class MultiSine:
+    """A Schroeder-phased multisine on every joint at once (the system-identification
+    classic): ``freqs`` [Hz] log-spaced over 0.1-3.5 Hz per joint, amplitudes ∝ 1/(1 + f²),
+    around a random pose, faded in and out over 1 s (the run starts and ends at rest)."""
+
+    duration: float
+    p0: np.ndarray
+    comps: List[Tuple[int, float, float, float]]  # (joint, f [Hz], amplitude [rad], phase)
+    plan: List[str] = field(default_factory=lambda: ["multisine"])
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        def ramp(x: np.ndarray) -> np.ndarray:
+            x = np.clip(x, 0.0, 1.0)
+            return 10 * x**3 - 15 * x**4 + 6 * x**5
+        env = ramp(t - 0.5) * ramp(self.duration - 0.5 - t)
+        q = np.tile(self.p0, (t.size, 1))
+        for j, f, a, ph in self.comps:
+            q[:, j] += a * env * np.sin(2 * np.pi * f * t + ph)
+        return q
+
+
+def multisine(duration: float, seed: int, *, amplitude: float = 1.0, wrinkle: bool = False) -> MultiSine:
+    """A :class:`MultiSine` experiment of ``duration`` [s] drawn from ``seed``."""
+    rng = _rng(seed, "multisine")
+    lo, hi = Q_LO.copy(), Q_HI.copy()
+    if wrinkle:
+        lo[1], hi[1] = -0.35, 0.25
+        lo[2], hi[2] = -0.4, 0.4
+    p0 = 0.5 * (lo + hi) + rng.uniform(-0.2, 0.2, 3) * (hi - lo)
+    comps = []
+    total = np.array([0.45, 0.2, 0.4]) * amplitude  # peak excursion budget per joint [rad]
+    total = np.minimum(total, 0.95 * np.minimum(p0 - lo, hi - p0))  # the sum of the amplitudes stays in range
+    for j in range(3):
+        n = int(rng.integers(5, 9))
+        f = np.exp(np.linspace(math.log(rng.uniform(0.08, 0.15)), math.log(rng.uniform(2.5, 3.5)), n))
+        a = 1.0 / (1.0 + f**2)
+        a *= total[j] / a.sum()
+        k = np.arange(n)
+        ph = -np.pi * k * (k + 1) / n + rng.uniform(0, 2 * np.pi)  # Schroeder phases: a low crest factor
+        comps += [(j, float(fi), float(ai), float(p)) for fi, ai, p in zip(f, a, ph)]
+    return MultiSine(duration=float(duration), p0=p0, comps=comps)
+
+
+def excitation_of(style: str, duration: float, seed: int, *, amplitude: float = 1.0, wrinkle: bool = False) -> Any:
+    """The excitation of ``style`` (:data:`STYLES`): a callable t [s] → q (N, 3) [rad]."""
+    if style == "lab":
+        return excitation(duration, seed=seed, amplitude=amplitude, wrinkle=wrinkle)
+    if style == "trapezoid":
+        return trapezoid_moves(duration, seed, amplitude=amplitude, wrinkle=wrinkle)
+    if style == "multisine":
+        return multisine(duration, seed, amplitude=amplitude, wrinkle=wrinkle)
+    raise ValueError(f"excitation style {style!r}: expected one of {STYLES}")
+
+
 def make_stamps(duration: float, rate: float, jitter: float, rng: np.random.Generator, grid: float = MJ_DT) -> np.ndarray:
     """Sample instants [s] at ``rate`` [Hz] over ``duration``, each moved by a Gaussian
     jitter of ``jitter`` × the period (clipped at ±0.35 periods), on the ``grid`` (a
@@ -276,6 +414,7 @@ class RunSpec:
     rate: float = 500.0
     jitter: float = 0.0
     amplitude: float = 1.0
+    style: str = "lab"  # the excitation (STYLES)
     wrinkle_poses: bool = False
     noise_scale: float = 1.0
     noise_lowpass_hz: float = 0.0  # IMU and torque noise through a 1-pole low-pass (0: white)
@@ -1067,8 +1206,8 @@ def write(spec: RunSpec, data: Mapping[str, np.ndarray], out_dir: Any) -> Path:
 
 def clean_channels(spec: RunSpec) -> Tuple[Dict[str, np.ndarray], Excitation]:
     """The noise-free channels of ``spec`` at its stamps, from its engine."""
-    exc = excitation(spec.duration, seed=int(_seq(spec.seed, spec.engine, spec.family, spec.index, "exc").generate_state(1)[0]),
-                     amplitude=spec.amplitude, wrinkle=spec.wrinkle_poses)
+    exc = excitation_of(spec.style, spec.duration, seed=int(_seq(spec.seed, spec.engine, spec.family, spec.index, "exc").generate_state(1)[0]),
+                        amplitude=spec.amplitude, wrinkle=spec.wrinkle_poses)
     st = make_stamps(spec.duration, spec.rate, spec.jitter, _rng(spec.seed, spec.engine, spec.family, spec.index, "stamps"))
     if "actuator_saturation" in spec.effects and "frac" in spec.effects["actuator_saturation"]:
         # the limit as a fraction of the peak torque the nominal replay needs
@@ -1252,14 +1391,15 @@ def _channel_options(effects: Sequence[str], engine: str) -> List[str]:
     return opts
 
 
-def family_specs(kind: str, engine: str, n: int, seed: int, **overrides: Any) -> List[RunSpec]:
+def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[Sequence[str]] = None, **overrides: Any) -> List[RunSpec]:
     """The ``n`` run specs of a family: ``kind`` is an effect name (that effect alone,
     levels alternating near/above), ``"pairs"`` (two effects, cycling :data:`PAIRS`),
     ``"nominal"`` (nothing hidden) or ``"disturbance"`` (a periodic disturbance outside
     the library). The lab conditions vary run by run: rate 200/500/1000 Hz (cycled),
     jittered stamps (half the runs), channel set (cycled over the sets the truth can be
     seen in), dropouts, noise × 0.3-3 (log-uniform; drag ≤ 1), encoder 12/14/16 bits,
-    payload, pressures, excitation, duration 10-14 s. The cycles start at a phase of
+    payload, pressures, excitation (its style cycled over :data:`STYLES`, or over ``styles``;
+    the trajectory drawn per run), duration 10-14 s. The cycles start at a phase of
     their own per family, so that even ``n = 1`` spreads rates, channel sets and levels
     over the families. ``overrides`` set any :class:`RunSpec` field of every run after the
     draw (e.g. ``duration=3.0`` for quick tests)."""
@@ -1267,6 +1407,9 @@ def family_specs(kind: str, engine: str, n: int, seed: int, **overrides: Any) ->
         raise ValueError(f"engine {engine!r}: expected one of {ENGINES}")
     if kind not in FAMILY_KINDS:
         raise ValueError(f"family {kind!r}: expected one of {FAMILY_KINDS}")
+    for st in styles or ():
+        if st not in STYLES:
+            raise ValueError(f"excitation style {st!r}: expected one of {STYLES}")
     if kind in LIBRARY and kind not in EFFECT_FAMILIES[engine]:
         raise ValueError(f"the {engine} engine has no {kind} family (see the families module docs)")
     specs = []
@@ -1291,6 +1434,7 @@ def family_specs(kind: str, engine: str, n: int, seed: int, **overrides: Any) ->
         sp.channels = chans[(i // 2 + off) % len(chans)] if kind in LIBRARY else chans[(i + off) % len(chans)]
         sp.dropouts = bool(rng.random() < 0.4)
         sp.duration = float(np.round(rng.uniform(10.0, 14.0) * 2) / 2)
+        sp.style = STYLES[(i + off) % len(STYLES)] if styles is None else styles[(i + off) % len(styles)]
         sp.payload_kg = float(rng.choice([0.5, 1.0, 1.5, 2.0]))
         sp.pressure_pa = (float(np.round(rng.uniform(22e3, 45e3), -2)), float(np.round(rng.uniform(22e3, 45e3), -2)))
         sp.amplitude = _r(rng.uniform(0.7, 1.2))

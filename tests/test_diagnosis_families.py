@@ -203,6 +203,62 @@ def test_variations_are_really_in_the_files(tmp_path):
     assert 0.8 * F.NOISE["imu"] < noise_std(t[200:-200], e, correlation_s=CORRELATION_S) < 1.25 * F.NOISE["imu"]
 
 
+@pytest.mark.parametrize("style", F.STYLES)
+def test_excitation_styles_start_at_rest_stay_in_range_and_move_every_joint(style):
+    t = np.linspace(0.0, 12.0, 24001)
+    h = t[1] - t[0]
+    for seed in range(4):
+        for wrinkle in (False, True):
+            e = F.excitation_of(style, 12.0, seed, amplitude=1.2, wrinkle=wrinkle)
+            q = e(t)
+            assert q.shape == (t.size, 3) and np.all(np.isfinite(q))
+            lo, hi = F.Q_LO.copy(), F.Q_HI.copy()
+            if wrinkle:
+                lo[1:], hi[1:] = (-0.35, -0.4), (0.25, 0.4)
+            # the lab plan clamps its waypoints; its oscillations may add a little
+            tol = 0.3 if style == "lab" else 1e-9
+            assert np.all(q >= lo - tol) and np.all(q <= hi + tol), (style, seed, q.min(0), q.max(0))
+            dq = np.gradient(q, h, axis=0)
+            # at rest at the start (the run starts in static equilibrium) and at the end (ring-down)
+            assert np.abs(dq[: int(0.4 / h)]).max() < 1e-6 and np.abs(dq[-int(0.4 / h):]).max() < 1e-6
+            assert np.all(np.ptp(q, axis=0) > 0.02), (style, seed, np.ptp(q, axis=0))
+            # velocity reversals (friction, backlash), q1's among them (out of the vertical plane)
+            rev = [int(np.sum(np.diff(np.sign(dq[np.abs(dq[:, j]) > 1e-3, j])) != 0)) for j in range(3)]
+            assert rev[0] >= 1 and sum(rev) >= 3, (style, seed, rev)
+    # different seeds, different trajectories; the same seed, the same one
+    assert not np.allclose(F.excitation_of(style, 12.0, 1)(t), F.excitation_of(style, 12.0, 2)(t))
+    assert np.array_equal(F.excitation_of(style, 12.0, 1)(t), F.excitation_of(style, 12.0, 1)(t))
+
+
+def test_trapezoid_moves_are_c1_with_acceleration_steps_and_the_multisine_is_broadband():
+    t = np.linspace(0.0, 12.0, 120001)
+    h = t[1] - t[0]
+    e = F.excitation_of("trapezoid", 12.0, 4)
+    q = e(t)
+    dq = np.gradient(q, h, axis=0)
+    ddq = np.gradient(dq, h, axis=0)
+    # the leading joint of each move runs at ±a_max (plateaus), and q̈ jumps by a_max in one sample
+    lead = np.abs(ddq).max(axis=1)
+    assert abs(np.percentile(lead[lead > 1e-3], 50) - e.a_max) < 0.02 * e.a_max
+    assert np.abs(np.diff(ddq, axis=0)).max() > 0.3 * e.a_max  # a C2 path would change by jerk·h ≈ 1e-3 × that
+    assert np.abs(np.diff(dq, axis=0)).max() < 2 * e.a_max * h  # velocity continuous
+    # the multisine: every joint excited over a band that crosses the first bending mode (2.4-3.2 Hz)
+    m = F.excitation_of("multisine", 12.0, 4)
+    for j in range(3):
+        fs = sorted(f for jj, f, _, _ in m.comps if jj == j)
+        assert fs[0] < 0.2 and fs[-1] > 2.4 and len(fs) >= 5
+
+
+def test_families_cycle_the_excitation_styles():
+    specs = [sp for kind in F.FAMILY_KINDS for sp in F.family_specs(kind, "popup", 3, 0)]
+    assert {sp.style for sp in specs} == set(F.STYLES)
+    for kind in ("joint_friction", "nominal"):
+        assert {sp.style for sp in F.family_specs(kind, "mujoco", 3, 1)} == set(F.STYLES)
+    assert {sp.style for sp in F.family_specs("backlash", "popup", 4, 0, styles=["trapezoid"])} == {"trapezoid"}
+    with pytest.raises(ValueError, match="style"):
+        F.family_specs("backlash", "popup", 1, 0, styles=["zigzag"])
+
+
 def test_runs_are_deterministic_from_the_seed(tmp_path):
     a = F.make_family("pairs", "popup", 2, 5, tmp_path / "a", **QUICK)
     b = F.make_family("pairs", "popup", 2, 5, tmp_path / "b", jobs=2, **QUICK)
@@ -302,7 +358,7 @@ def test_diagnosis_finds_a_hidden_effect_well_above_the_noise(engine, kind, tmp_
 def test_diagnosis_raises_no_false_alarm_on_a_nominal_run(engine, tmp_path):
     if engine == "mujoco":
         pytest.importorskip("mujoco")
-    sp = F.family_specs("nominal", engine, 1, 0, duration=10.0, channels="full", noise_lowpass_hz=35.0)[0]
+    sp = F.family_specs("nominal", engine, 1, 0, duration=10.0, channels="full", noise_lowpass_hz=35.0, style="lab")[0]
     path, truth = F.make_run(sp, tmp_path)
     oc = _diagnosed(path, truth)
     assert oc["ok"], oc
@@ -310,7 +366,7 @@ def test_diagnosis_raises_no_false_alarm_on_a_nominal_run(engine, tmp_path):
 
 def test_diagnosis_leaves_a_mujoco_disturbance_outside_the_library(tmp_path):
     pytest.importorskip("mujoco")
-    sp = F.family_specs("disturbance", "mujoco", 1, 0, duration=10.0, channels="full")[0]
+    sp = F.family_specs("disturbance", "mujoco", 1, 0, duration=10.0, channels="full", style="lab")[0]
     path, truth = F.make_run(sp, tmp_path)
     oc = _diagnosed(path, truth)
     assert oc["ok"], oc
