@@ -4,7 +4,9 @@ Each run is what a lab would record on an arm whose physics the analyst does not
 know: an encoder-replay experiment (motor angles, motor torques, tip IMUs, motion-capture
 end effector, optionally pressures) with sensor noise, encoder quantisation, a sample rate
 of 200/500/1000 Hz (optionally jittered stamps), a channel set, NaN dropouts, and a hidden
-truth (one effect, a pair, none, or a disturbance outside the effect library). The run
+truth (one effect, a pair, none, or a disturbance outside the effect library), driven by
+one of three kinds of trajectory (:data:`STYLES`: a lab plan of min-jerk moves, reversals,
+a chirp and a sweep; trapezoidal-velocity point-to-point moves; a multisine). The run
 folder (``experiment.toml`` + ``measurements.csv``, :func:`popup.io.write_run`) declares
 only what a lab knows (arm ``popup-lab``, payload, pressures, ``replay = "encoder"``);
 the truth is recorded in the description only (``truth = {json}``).
