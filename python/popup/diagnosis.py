@@ -148,7 +148,14 @@ _STIFFEST: Dict[str, Dict[str, Any]] = {
 }
 
 VARIANTS: Dict[str, List[Dict[str, Any]]] = {
-    "joint_friction": [{"name": "Stribeck", "extra": ["tau_s", "v_s"], "seeds": [{"tau_s": 0.5, "v_s": 0.05}, {"tau_s": 1.5, "v_s": 0.1}, {"tau_s": 1.0, "v_s": 0.02}]}],
+    "joint_friction": [{"name": "Stribeck", "extra": ["tau_s", "v_s"], "seeds": [{"tau_s": 0.5, "v_s": 0.05}, {"tau_s": 1.5, "v_s": 0.1}, {"tau_s": 1.0, "v_s": 0.02}]},
+                       # how sharply the friction reverses (a gear's presliding width): a law with a
+                       # sharper sign than the default is otherwise mimicked by a Stribeck bump at
+                       # v_s ≈ v_eps (MuJoCo friction with a 3 mrad/s sign: τ_s 6.6 N·m for a true 1.07)
+                       {"name": "sign width", "extra": ["v_eps"], "seeds": [{"v_eps": 0.003}, {"v_eps": 0.001}, {"v_eps": 0.03}]},
+                       {"name": "Stribeck and sign width", "extra": ["tau_s", "v_s", "v_eps"],
+                        "seeds": [{"tau_s": 0.3, "v_s": 0.05, "v_eps": 0.003}, {"tau_s": 0.3, "v_s": 0.05, "v_eps": 0.001},
+                                  {"tau_s": 1.0, "v_s": 0.1, "v_eps": 0.003}, {"tau_s": 0.5, "v_s": 0.05, "v_eps": 0.03}]}],
     "higher_bending_modes": [{"name": "3 segments", "structure": {"segments": [3.0, 3.0]}}],
     "payload_mass": [{"name": "centre-of-mass offset", "extra": ["com_offset_m"]}],
     # how fast a link side crosses its gap depends on the gear's link-side inertia
@@ -806,12 +813,27 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
         except Exception as e:  # noqa: BLE001
             notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
             continue
-        if vf.significant and vf.score > best.score + (SCORE_THRESHOLD if best.significant else 0.0):
-            notes.append(f"variant {var['name']} preferred (score {vf.score:.1f} vs {best.score:.1f})")
+        gain = _gain(vf, best)
+        if vf.significant and gain > (SCORE_THRESHOLD if best.significant else 0.0):
+            notes.append(f"variant {var['name']} preferred (score {vf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f})")
             best = vf
         else:
-            notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f})")
+            notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f})")
     return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
+
+
+def _gain(a: _Fitted, b: _Fitted) -> float:
+    """BIC gain of fit ``a`` over fit ``b`` of the same run: their likelihood ratio taken
+    directly, with one effective sample count (``a``'s residual), less ln n_eff per extra
+    parameter. Each fit's score against the nominal weighs its log-ratio by the n_eff of
+    its own residual, so two good fits of the same law differ there by a percent of a large
+    score (a friction fit whose residual is 1 % whiter scored 100 more with three parameters
+    that landed on the default); a direct ratio does not. Fits on different output grids
+    fall back to the difference of their scores."""
+    if a.out.z.shape == b.out.z.shape and np.array_equal(np.asarray(a.prob.time), np.asarray(b.prob.time)):
+        lr, ne = est.log_ratio(a.prob, b.out.z, a.out.z, a.prob.train)
+        return lr - (a.k - b.k) * math.log(ne)
+    return a.score - b.score
 
 
 def _refit_jointly(prob: ReplayProblem, s: Suspect, ev: Dict[str, Any], max_iter: int, also: List[Tuple[fx.EffectParam, int]]) -> Suspect:

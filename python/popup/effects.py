@@ -172,7 +172,7 @@ def from_flat(v: Any, *, only_active: bool = True) -> Dict[str, Dict[str, List[f
     return out
 
 
-_SHAPING = {("joint_friction", "v_s"), ("torsion", "c_t"), ("higher_bending_modes", "k_scale")}
+_SHAPING = {("joint_friction", "v_s"), ("joint_friction", "v_eps"), ("torsion", "c_t"), ("higher_bending_modes", "k_scale")}
 
 
 def is_neutral(effect: str, v: Any) -> bool:

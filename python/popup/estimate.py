@@ -70,6 +70,7 @@ PARAM_SCALE: Dict[Tuple[str, str], float] = {
     ("joint_friction", "b"): 0.5,
     ("joint_friction", "tau_s"): 1.0,
     ("joint_friction", "v_s"): 0.05,
+    ("joint_friction", "v_eps"): 1.0,  # fitted as ln v_eps (LOG_PARAMS)
     ("backlash", "gap"): 1e-3,
     ("backlash", "inertia"): 1.0,  # fitted as ln J (LOG_PARAMS)
     ("higher_bending_modes", "k_scale"): 0.5,
@@ -120,10 +121,13 @@ BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
     # a gear's link side: from an output flange alone to a whole motoreducer's reflected
     # inertia (below 1e-3 kg·m² its free mode needs a step far below a lab rate)
     ("backlash", "inertia"): (1e-3, 1.0),
+    # the friction sign's width: below ~5e-4 rad/s it is narrower than the velocity noise of
+    # a smoothed lab encoder (the sign would flip with the noise), above 0.3 rad/s it is viscous
+    ("joint_friction", "v_eps"): (5e-4, 0.3),
 }
 
 #: Positive parameters fitted as their logarithm (module docs).
-LOG_PARAMS = {("torsion", "k_t"), ("backlash", "inertia")}
+LOG_PARAMS = {("torsion", "k_t"), ("backlash", "inertia"), ("joint_friction", "v_eps")}
 
 _NUDGE = 0.2
 

@@ -10,8 +10,10 @@
 //!
 //! Physical definitions (SI units; `docs/effects.md` has the derivations):
 //! - `joint_friction`: motor-side torque `τ_f = (τ_c + τ_s e^{−(q̇/v_s)²}) tanh(q̇/v_ε) + b q̇`
-//!   with `v_ε` = [`FRICTION_V_EPS`]; it opposes the motor in torque drive and adds to the
-//!   torque the motor must deliver in replay (the `tau*` channels).
+//!   with the sign's width `v_ε` (`v_eps`, default [`FRICTION_V_EPS`]: how sharply the
+//!   friction reverses with the velocity, the presliding regime of a real gear); it opposes
+//!   the motor in torque drive and adds to the torque the motor must deliver in replay (the
+//!   `tau*` channels).
 //! - `backlash`: a dead zone of full width `gap` between the motor side (encoder, prescribed
 //!   in replay) and the link side of each motor joint, which becomes a degree of freedom of
 //!   its own: free inside the gap (with the gear's link-side `inertia`), in rigid unilateral
@@ -40,7 +42,7 @@ use serde::{Deserialize, Serialize};
 
 /// Air density used by `air_drag` [kg/m³] (sea level, 20 °C).
 pub const AIR_DENSITY: f64 = 1.204;
-/// Velocity scale of the smoothed sign in `joint_friction` [rad/s].
+/// Default velocity scale of the smoothed sign in `joint_friction` (`v_eps`) [rad/s].
 pub const FRICTION_V_EPS: f64 = 1e-2;
 
 /// Coulomb + viscous (+ Stribeck) friction in each motoreducer.
@@ -55,6 +57,8 @@ pub struct JointFriction {
     pub tau_s: [f64; 3],
     /// Stribeck velocity [rad/s].
     pub v_s: [f64; 3],
+    /// Velocity scale of the smoothed sign, `tanh(q̇/v_eps)` [rad/s].
+    pub v_eps: [f64; 3],
 }
 impl JointFriction {
     /// True when any friction torque is non-zero.
@@ -65,7 +69,7 @@ impl JointFriction {
 }
 impl Default for JointFriction {
     fn default() -> Self {
-        JointFriction { tau_c: [0.0; 3], b: [0.0; 3], tau_s: [0.0; 3], v_s: [0.05; 3] }
+        JointFriction { tau_c: [0.0; 3], b: [0.0; 3], tau_s: [0.0; 3], v_s: [0.05; 3], v_eps: [FRICTION_V_EPS; 3] }
     }
 }
 
@@ -322,6 +326,7 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
     p("joint_friction", "b", "N·m·s/rad", 3, 0.0, 0.0, 100.0, true, "viscous friction per motor joint"),
     p("joint_friction", "tau_s", "N·m", 3, 0.0, 0.0, 100.0, false, "Stribeck excess static torque per motor joint"),
     p("joint_friction", "v_s", "rad/s", 3, 0.05, 1e-4, 10.0, false, "Stribeck velocity per motor joint"),
+    p("joint_friction", "v_eps", "rad/s", 3, FRICTION_V_EPS, 1e-4, 1.0, false, "velocity scale of the smoothed sign tanh(v/v_eps) per motor joint (how sharply friction reverses)"),
     p("backlash", "gap", "rad", 3, 0.0, 0.0, 0.2, true, "full width of the dead zone per motor joint"),
     p("backlash", "inertia", "kg·m²", 3, BACKLASH_INERTIA, 1e-4, 10.0, false, "link-side inertia of the gear about the motor axis, felt inside the gap"),
     p("backlash", "restitution", "1", 3, 0.0, 0.0, 0.95, false, "coefficient of restitution of the gear's flanks (0 = plastic impact)"),
@@ -395,7 +400,7 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
 ];
 
 /// Number of registered parameters.
-pub const NPARAM: usize = 30;
+pub const NPARAM: usize = 31;
 
 /// Length of the flat effect vector.
 pub const NE: usize = {
@@ -427,6 +432,7 @@ impl Effects {
             &e.joint_friction.b,
             &e.joint_friction.tau_s,
             &e.joint_friction.v_s,
+            &e.joint_friction.v_eps,
             &e.backlash.gap,
             &e.backlash.inertia,
             &e.backlash.restitution,
@@ -463,6 +469,7 @@ impl Effects {
             &mut e.joint_friction.b,
             &mut e.joint_friction.tau_s,
             &mut e.joint_friction.v_s,
+            &mut e.joint_friction.v_eps,
             &mut e.backlash.gap,
             &mut e.backlash.inertia,
             &mut e.backlash.restitution,
@@ -549,7 +556,7 @@ impl Effects {
             // parameters that only shape an effect whose strength is neutral do not count
             let shaping = matches!(
                 (ps.effect, ps.name),
-                ("joint_friction", "v_s") | ("backlash", "inertia" | "restitution" | "held") | ("torsion", "c_t") | ("higher_bending_modes", "k_scale" | "e_pa" | "wall_m" | "nu" | "lambda_s" | "mu_per_s" | "shear")
+                ("joint_friction", "v_s" | "v_eps") | ("backlash", "inertia" | "restitution" | "held") | ("torsion", "c_t") | ("higher_bending_modes", "k_scale" | "e_pa" | "wall_m" | "nu" | "lambda_s" | "mu_per_s" | "shear")
             );
             shaping || s.iter().all(|&x| x.to_bits() == ps.neutral.to_bits())
         })
@@ -589,7 +596,7 @@ pub fn friction_torque(f: &JointFriction, k: usize, v: f64) -> f64 {
         let r = v / f.v_s[k];
         s += f.tau_s[k] * (-r * r).exp();
     }
-    s * (v / FRICTION_V_EPS).tanh() + f.b[k] * v
+    s * (v / f.v_eps[k]).tanh() + f.b[k] * v
 }
 
 /// Leak factor p(t)/p₀ for link `l`.

@@ -109,6 +109,7 @@ fn every_parameter_moves_the_outputs() {
             // make the shaping parameters matter
             match (ps.effect, ps.name) {
                 ("joint_friction", "v_s") => base.joint_friction.tau_s = [1.0; 3],
+                ("joint_friction", "v_eps") => base.joint_friction.tau_c = [1.0; 3],
                 ("wrinkling", "mw_scale") => base.wrinkling.ratio = 0.3,
                 ("backlash", "inertia" | "restitution") => base.backlash.gap = [0.02; 3],
                 _ => {}
@@ -168,6 +169,46 @@ fn friction_in_replay_adds_exactly_the_friction_torque() {
     for c in ["d11", "d22", "ee_z", "imu2_ax"] {
         assert_eq!(col(&a, c), col(&b, c), "{c}");
     }
+}
+
+#[test]
+fn friction_sign_width_is_the_tanh_scale_and_neutral_without_friction() {
+    // the law written out: (tau_c + tau_s e^{-(v/v_s)^2}) tanh(v/v_eps) + b v
+    let mut fx = Effects::default();
+    fx.joint_friction.tau_c = [1.5, 2.0, 0.7];
+    fx.joint_friction.b = [0.3, 0.2, 0.1];
+    fx.joint_friction.tau_s = [0.4, 0.0, 0.2];
+    fx.joint_friction.v_s = [0.05, 0.05, 0.02];
+    fx.joint_friction.v_eps = [0.003, 0.03, 0.1];
+    let a = replay(Effects::default());
+    let b = replay(fx);
+    let f = fx.joint_friction;
+    for k in 0..3 {
+        let dq = col(&a, &format!("dq{}", k + 1));
+        let ta = col(&a, &format!("tau{}", k + 1));
+        let tb = col(&b, &format!("tau{}", k + 1));
+        for r in 0..a.nsample {
+            let v = dq[r];
+            let want = (f.tau_c[k] + f.tau_s[k] * (-(v / f.v_s[k]).powi(2)).exp()) * (v / f.v_eps[k]).tanh() + f.b[k] * v;
+            assert!((tb[r] - ta[r] - want).abs() < 1e-9, "joint {k} row {r}");
+        }
+    }
+    // a sharper sign is closer to sign(v): at v = v_eps/2 of the default, the default gives
+    // tanh(0.5) of the Coulomb torque, a 10 × sharper one almost all of it
+    let mut sharp = Effects::default().joint_friction;
+    sharp.tau_c = [1.0; 3];
+    let mut soft = sharp;
+    sharp.v_eps = [1e-3; 3];
+    let v = 0.5 * popup_core::effects::FRICTION_V_EPS;
+    assert!((friction_torque(&soft, 0, v) - 0.5f64.tanh()).abs() < 1e-12);
+    assert!(friction_torque(&sharp, 0, v) > 0.9999);
+    soft.v_eps = [popup_core::effects::FRICTION_V_EPS; 3];
+    assert_eq!(soft, { let mut d = Effects::default().joint_friction; d.tau_c = [1.0; 3]; d });
+    // without a friction torque the width changes nothing: neutral, bit for bit
+    let mut w = Effects::default();
+    w.joint_friction.v_eps = [0.002, 0.5, 0.05];
+    assert!(w.is_neutral("joint_friction"));
+    assert_eq!(bits(&replay(w)), bits(&a));
 }
 
 #[test]
