@@ -172,7 +172,8 @@ def from_flat(v: Any, *, only_active: bool = True) -> Dict[str, Dict[str, List[f
     return out
 
 
-_SHAPING = {("joint_friction", "v_s"), ("joint_friction", "v_eps"), ("torsion", "c_t"), ("higher_bending_modes", "k_scale")}
+#: parameters that only shape an effect (neutral while its strength is), from the core
+_SHAPING = frozenset(_core.effect_shaping())
 
 
 def is_neutral(effect: str, v: Any) -> bool:

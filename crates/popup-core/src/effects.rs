@@ -554,11 +554,7 @@ impl Effects {
         let slots = self.slots();
         PARAMS[..NPARAM].iter().zip(slots.iter()).filter(|(ps, _)| ps.effect == effect).all(|(ps, s)| {
             // parameters that only shape an effect whose strength is neutral do not count
-            let shaping = matches!(
-                (ps.effect, ps.name),
-                ("joint_friction", "v_s" | "v_eps") | ("backlash", "inertia" | "restitution" | "held") | ("torsion", "c_t") | ("higher_bending_modes", "k_scale" | "e_pa" | "wall_m" | "nu" | "lambda_s" | "mu_per_s" | "shear")
-            );
-            shaping || s.iter().all(|&x| x.to_bits() == ps.neutral.to_bits())
+            is_shaping(ps.effect, ps.name) || s.iter().all(|&x| x.to_bits() == ps.neutral.to_bits())
         })
     }
 
@@ -586,6 +582,29 @@ impl Effects {
         }
         Ok(())
     }
+}
+
+/// The parameters that only shape an effect: they change nothing while the effect's
+/// strength parameters are neutral (so [`Effects::is_neutral`] ignores them).
+pub const SHAPING: [(&str, &str); 13] = [
+    ("joint_friction", "v_s"),
+    ("joint_friction", "v_eps"),
+    ("backlash", "inertia"),
+    ("backlash", "restitution"),
+    ("backlash", "held"),
+    ("torsion", "c_t"),
+    ("higher_bending_modes", "k_scale"),
+    ("higher_bending_modes", "e_pa"),
+    ("higher_bending_modes", "wall_m"),
+    ("higher_bending_modes", "nu"),
+    ("higher_bending_modes", "lambda_s"),
+    ("higher_bending_modes", "mu_per_s"),
+    ("higher_bending_modes", "shear"),
+];
+
+/// Whether `effect.name` is a shaping parameter ([`SHAPING`]).
+pub fn is_shaping(effect: &str, name: &str) -> bool {
+    SHAPING.iter().any(|&(e, n)| e == effect && n == name)
 }
 
 /// Motor-side friction torque at motor rate `v` [N·m] (joint `k` of 3).

@@ -172,6 +172,24 @@ fn friction_in_replay_adds_exactly_the_friction_torque() {
 }
 
 #[test]
+fn shaping_parameters_are_registered_and_neutral_while_their_effect_is() {
+    use popup_core::effects::SHAPING;
+    let a = replay(Effects::default());
+    for (e, n) in SHAPING {
+        let (i, ps) = PARAMS.iter().enumerate().find(|(_, p)| p.effect == e && p.name == n).unwrap_or_else(|| panic!("{e}.{n} not in the registry"));
+        let off = popup_core::effects::offset(i);
+        let mut v = Effects::default().to_flat();
+        // a value inside the bounds, away from neutral
+        v[off] = if ps.integer { ps.hi } else if ps.neutral != ps.lo { 0.5 * (ps.neutral + ps.lo.max(ps.neutral * 0.1)) } else { ps.lo + 0.1 * (ps.hi - ps.lo).min(1.0) };
+        let fx = Effects::from_flat(&v).unwrap();
+        assert!(fx.is_neutral(e), "{e}.{n} = {} makes {e} active", v[off]);
+        if e != "higher_bending_modes" && e != "torsion" {
+            assert_eq!(bits(&replay(fx)), bits(&a), "{e}.{n} = {} changed a nominal replay", v[off]);
+        }
+    }
+}
+
+#[test]
 fn friction_sign_width_is_the_tanh_scale_and_neutral_without_friction() {
     // the law written out: (tau_c + tau_s e^{-(v/v_s)^2}) tanh(v/v_eps) + b v
     let mut fx = Effects::default();

@@ -364,6 +364,13 @@ pub fn effect_registry() -> Vec<(&'static str, &'static str, &'static str, usize
     popup_core::effects::PARAMS.iter().map(|p| (p.effect, p.name, p.unit, p.len, p.neutral, p.lo, p.hi, p.fit, p.integer, p.doc)).collect()
 }
 
+/// The shaping parameters (effect, name): they change nothing while their effect's
+/// strength is neutral (`popup_core::effects::SHAPING`).
+#[pyfunction]
+pub fn effect_shaping() -> Vec<(&'static str, &'static str)> {
+    popup_core::effects::SHAPING.to_vec()
+}
+
 /// One open-loop run streamed into an MCAP log and collected.
 fn logged(model: &Model, job: &Job, path: &str, experiment: String, stop: &std::sync::atomic::AtomicBool) -> popup_core::Result<popup_core::sim::Trajectory> {
     use popup_core::log::{LogOptions, McapLogger, RunMeta};
