@@ -6,7 +6,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, final
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "closed_loop_rollout", "closed_loop_rollout_multi", "linearize", "controller_params", "check_control", "check_scenario", "scenario_set_key", "run_scenario", "control_channels", "gain_names", "EFFECT_NAMES", "BEAM_PRESETS", "CHANNEL_LIMITS", "GAP_WARN_STEPS", "GAP_ERROR_STEPS", "MAX_STEPS", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
+__all__ = ["Arm", "RigidArm", "Model", "_raise", "run_cli", "effect_registry", "effect_shaping", "closed_loop_rollout", "closed_loop_rollout_multi", "linearize", "controller_params", "check_control", "check_scenario", "scenario_set_key", "run_scenario", "control_channels", "gain_names", "EFFECT_NAMES", "BEAM_PRESETS", "CHANNEL_LIMITS", "GAP_WARN_STEPS", "GAP_ERROR_STEPS", "MAX_STEPS", "__version__", "BUILD_PROFILE", "BUILD_FEATURES"]
 
 __version__: str
 BUILD_PROFILE: str
