@@ -146,6 +146,16 @@ Q_LO = np.array([-1.2, -1.45, -1.0])
 Q_HI = np.array([1.2, 0.5, 1.3])
 
 
+def pose_range(wrinkle: bool = False) -> Tuple[np.ndarray, np.ndarray]:
+    """Joint range [rad] of the excitations; ``wrinkle``: q2, q3 near horizontal (large
+    bending moments)."""
+    lo, hi = Q_LO.copy(), Q_HI.copy()
+    if wrinkle:
+        lo[1], hi[1] = -0.35, 0.25
+        lo[2], hi[2] = -0.4, 0.4
+    return lo, hi
+
+
 @dataclass
 class Excitation:
     """A smooth (C2) motor trajectory, evaluated anywhere: a min-jerk path through
@@ -192,10 +202,7 @@ def excitation(duration: float, seed: int, *, amplitude: float = 1.0, pose0: Opt
     ``wrinkle``: poses near horizontal (large bending moments)."""
     rng = _rng(seed, "excitation")
     a = float(amplitude)
-    lo, hi = Q_LO.copy(), Q_HI.copy()
-    if wrinkle:
-        lo[1], hi[1] = -0.35, 0.25
-        lo[2], hi[2] = -0.4, 0.4
+    lo, hi = pose_range(wrinkle)
     p0 = np.array(pose0, dtype=float) if pose0 is not None else rng.uniform(lo * 0.7, hi * 0.7)
     blocks = ["move", "move", "rev_q1", "rev_q23", "chirp", "sweep_q1"]
     if duration >= 14:
@@ -286,10 +293,7 @@ class TrapezoidMoves:
 def trapezoid_moves(duration: float, seed: int, *, amplitude: float = 1.0, wrinkle: bool = False) -> TrapezoidMoves:
     """A :class:`TrapezoidMoves` experiment of ``duration`` [s] drawn from ``seed``."""
     rng = _rng(seed, "trapezoid")
-    lo, hi = Q_LO.copy(), Q_HI.copy()
-    if wrinkle:
-        lo[1], hi[1] = -0.35, 0.25
-        lo[2], hi[2] = -0.4, 0.4
+    lo, hi = pose_range(wrinkle)
     a_max = float(rng.uniform(2.5, 6.0)) * max(amplitude, 0.5)
     v_max = float(rng.uniform(0.6, 1.4)) * amplitude
     p0 = rng.uniform(lo * 0.7, hi * 0.7)
@@ -352,10 +356,7 @@ class MultiSine:
 def multisine(duration: float, seed: int, *, amplitude: float = 1.0, wrinkle: bool = False) -> MultiSine:
     """A :class:`MultiSine` experiment of ``duration`` [s] drawn from ``seed``."""
     rng = _rng(seed, "multisine")
-    lo, hi = Q_LO.copy(), Q_HI.copy()
-    if wrinkle:
-        lo[1], hi[1] = -0.35, 0.25
-        lo[2], hi[2] = -0.4, 0.4
+    lo, hi = pose_range(wrinkle)
     p0 = 0.5 * (lo + hi) + rng.uniform(-0.2, 0.2, 3) * (hi - lo)
     comps = []
     total = np.array([0.45, 0.2, 0.4]) * amplitude  # peak excursion budget per joint [rad]

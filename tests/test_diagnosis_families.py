@@ -212,9 +212,7 @@ def test_excitation_styles_start_at_rest_stay_in_range_and_move_every_joint(styl
             e = F.excitation_of(style, 12.0, seed, amplitude=1.2, wrinkle=wrinkle)
             q = e(t)
             assert q.shape == (t.size, 3) and np.all(np.isfinite(q))
-            lo, hi = F.Q_LO.copy(), F.Q_HI.copy()
-            if wrinkle:
-                lo[1:], hi[1:] = (-0.35, -0.4), (0.25, 0.4)
+            lo, hi = F.pose_range(wrinkle)
             # the lab plan clamps its waypoints; its oscillations may add a little
             tol = 0.3 if style == "lab" else 1e-9
             assert np.all(q >= lo - tol) and np.all(q <= hi + tol), (style, seed, q.min(0), q.max(0))
