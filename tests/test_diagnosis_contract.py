@@ -72,6 +72,25 @@ def test_a_sharper_friction_sign_is_fitted_as_its_width_not_as_a_stribeck_bump(n
     # test_noise_only_channels_do_not_hide_the_finding keeps the plain Stribeck variant
 
 
+def test_a_stiffer_root_is_fitted_as_the_cantilever_split(nominal, tmp_path):
+    """Links that bend like a uniform cantilever: 2 segments with the root joint 4 × as stiff
+    as the mid one (the split that gives a cantilever's tip rotation as well as its tip
+    deflection; MuJoCo's family arm is built so). The equal split cannot place the second
+    mode; the root-ratio variant is preferred and lands on 4 (MuJoCo trapezoid run: 62.7 →
+    21.9 noise units with 3 equal segments, → 3.0 with root_ratio 4.01/4.05)."""
+    truth = {"segments": [2.0, 2.0], "k_scale": [1.2, 1.2], "root_ratio": [4.0, 4.0]}
+    t, q = popup.synth.lab_trajectory(6.0, seed=13)
+    run = popup.synth.measured_run(nominal.with_effect("higher_bending_modes", **truth), t, q, tmp_path / "root", seed=13)
+    d = popup.diagnose(nominal, run, effects=["higher_bending_modes"])
+    s = d.best
+    assert s is not None and s.effect == "higher_bending_modes" and s.variant == "stiffer root (cantilever split)", s.message
+    assert s.error_after <= 0.1 * s.error_before
+    for k in ("k_scale", "root_ratio"):
+        for i in range(2):
+            got, ci, want = s.params[k][i], s.ci95[k][i], truth[k][i]
+            assert math.isfinite(ci) and abs(got - want) <= 3 * ci + 0.03 * want, (k, i, got, ci, want)
+
+
 def test_a_refit_beyond_the_step_is_rerun_at_a_smaller_step(nominal, friction_run, monkeypatch):
     """A joint refit that moves a stiffness beyond what the candidate's step was chosen for
     fails the step check: the refit is repeated at half the step, not the whole round lost."""

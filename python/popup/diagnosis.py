@@ -156,7 +156,11 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
                        {"name": "Stribeck and sign width", "extra": ["tau_s", "v_s", "v_eps"],
                         "seeds": [{"tau_s": 0.3, "v_s": 0.05, "v_eps": 0.003}, {"tau_s": 0.3, "v_s": 0.05, "v_eps": 0.001},
                                   {"tau_s": 1.0, "v_s": 0.1, "v_eps": 0.003}, {"tau_s": 0.5, "v_s": 0.05, "v_eps": 0.03}]}],
-    "higher_bending_modes": [{"name": "3 segments", "structure": {"segments": [3.0, 3.0]}}],
+    # the springs along a link: equal (the default split) or a stiffer root, as in a
+    # continuous cantilever (4:1 for 2 segments gives its tip rotation as well as its deflection)
+    "higher_bending_modes": [{"name": "3 segments", "structure": {"segments": [3.0, 3.0]}},
+                             {"name": "stiffer root (cantilever split)", "extra": ["root_ratio"],
+                              "seeds": [{"root_ratio": 4.0}, {"root_ratio": 2.0}, {"root_ratio": 0.6}]}],
     "payload_mass": [{"name": "centre-of-mass offset", "extra": ["com_offset_m"]}],
     # how fast a link side crosses its gap depends on the gear's link-side inertia
     "backlash": [{"name": "fitted link-side inertia", "extra": ["inertia"], "seeds": [{"inertia": 0.003}, {"inertia": 0.03}, {"inertia": 0.1}, {"inertia": 0.3}]},

@@ -74,6 +74,7 @@ PARAM_SCALE: Dict[Tuple[str, str], float] = {
     ("backlash", "gap"): 1e-3,
     ("backlash", "inertia"): 1.0,  # fitted as ln J (LOG_PARAMS)
     ("higher_bending_modes", "k_scale"): 0.5,
+    ("higher_bending_modes", "root_ratio"): 1.0,  # fitted as ln r (LOG_PARAMS)
     ("higher_bending_modes", "e_pa"): 1e8,
     ("higher_bending_modes", "lambda_s"): 1e-4,
     ("pressure_leak", "rate"): 0.01,
@@ -124,10 +125,13 @@ BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
     # the friction sign's width: below ~5e-4 rad/s it is narrower than the velocity noise of
     # a smoothed lab encoder (the sign would flip with the noise), above 0.3 rad/s it is viscous
     ("joint_friction", "v_eps"): (5e-4, 0.3),
+    # a link's root joint from half to 8 × its outer joints (4 = a uniform cantilever's split
+    # for 2 segments); stiffer roots need ever smaller steps for what they add
+    ("higher_bending_modes", "root_ratio"): (0.5, 8.0),
 }
 
 #: Positive parameters fitted as their logarithm (module docs).
-LOG_PARAMS = {("torsion", "k_t"), ("backlash", "inertia"), ("joint_friction", "v_eps")}
+LOG_PARAMS = {("torsion", "k_t"), ("backlash", "inertia"), ("joint_friction", "v_eps"), ("higher_bending_modes", "root_ratio")}
 
 _NUDGE = 0.2
 

@@ -126,6 +126,10 @@ pub struct HigherBendingModes {
     pub segments: [f64; 2],
     /// Scale of the segment springs per link (1 = same static tip deflection as one joint).
     pub k_scale: [f64; 2],
+    /// Stiffness of a multi-segment link's root joint relative to its other joints, the
+    /// springs rescaled so that the static tip deflection under a tip force is unchanged
+    /// (1 = equal springs; 4 with 2 segments also gives a uniform cantilever's tip rotation).
+    pub root_ratio: [f64; 2],
     /// Euler–Bernoulli beam elements per link (structural): 0 = PRBM link, n = 1..=6 a beam
     /// link of n elements (`crate::beam::BeamLink`) whose material is the parameters below.
     pub elements: [f64; 2],
@@ -148,6 +152,7 @@ impl Default for HigherBendingModes {
         HigherBendingModes {
             segments: [1.0; 2],
             k_scale: [1.0; 2],
+            root_ratio: [1.0; 2],
             elements: [0.0; 2],
             e_pa: [m.e; 2],
             wall_m: [m.t; 2],
@@ -355,6 +360,7 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
         doc: "PRBM segments per link, 0 = a rigid link (structural)",
     },
     p("higher_bending_modes", "k_scale", "1", 2, 1.0, 0.05, 20.0, true, "scale of the segment springs per link"),
+    p("higher_bending_modes", "root_ratio", "1", 2, 1.0, 0.05, 20.0, false, "stiffness of a multi-segment link's root joint relative to its other joints, at the same static tip deflection (4 with 2 segments: a uniform cantilever's tip rotation too)"),
     ParamSpec {
         effect: "higher_bending_modes",
         name: "elements",
@@ -400,7 +406,7 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
 ];
 
 /// Number of registered parameters.
-pub const NPARAM: usize = 31;
+pub const NPARAM: usize = 32;
 
 /// Length of the flat effect vector.
 pub const NE: usize = {
@@ -439,6 +445,7 @@ impl Effects {
             &e.backlash.held,
             &e.higher_bending_modes.segments,
             &e.higher_bending_modes.k_scale,
+            &e.higher_bending_modes.root_ratio,
             &e.higher_bending_modes.elements,
             &e.higher_bending_modes.e_pa,
             &e.higher_bending_modes.wall_m,
@@ -476,6 +483,7 @@ impl Effects {
             &mut e.backlash.held,
             &mut e.higher_bending_modes.segments,
             &mut e.higher_bending_modes.k_scale,
+            &mut e.higher_bending_modes.root_ratio,
             &mut e.higher_bending_modes.elements,
             &mut e.higher_bending_modes.e_pa,
             &mut e.higher_bending_modes.wall_m,
@@ -586,7 +594,7 @@ impl Effects {
 
 /// The parameters that only shape an effect: they change nothing while the effect's
 /// strength parameters are neutral (so [`Effects::is_neutral`] ignores them).
-pub const SHAPING: [(&str, &str); 13] = [
+pub const SHAPING: [(&str, &str); 14] = [
     ("joint_friction", "v_s"),
     ("joint_friction", "v_eps"),
     ("backlash", "inertia"),
@@ -594,6 +602,7 @@ pub const SHAPING: [(&str, &str); 13] = [
     ("backlash", "held"),
     ("torsion", "c_t"),
     ("higher_bending_modes", "k_scale"),
+    ("higher_bending_modes", "root_ratio"),
     ("higher_bending_modes", "e_pa"),
     ("higher_bending_modes", "wall_m"),
     ("higher_bending_modes", "nu"),

@@ -133,8 +133,16 @@ impl ParamData {
             if model.beam[l].is_some() {
                 continue;
             }
-            // k_scale shapes the segments of a multi-segment link only (neutral for one)
-            let sc = if model.segments[l] > 1 { fx.higher_bending_modes.k_scale[l] } else { 1.0 };
+            // k_scale and root_ratio shape the segments of a multi-segment link only (neutral for one)
+            let mut sc = if model.segments[l] > 1 { fx.higher_bending_modes.k_scale[l] } else { 1.0 };
+            let r = fx.higher_bending_modes.root_ratio[l];
+            if model.segments[l] > 1 && r != 1.0 {
+                // root × r·α, the others × α, with α keeping Σ (1 − i/S)²/k_i (the static tip
+                // deflection under a tip force)
+                let f = model.seg_factor[l];
+                let alpha = (1.0 / r + f - 1.0) / f;
+                sc *= if model.joints[b].segment == 1 { r * alpha } else { alpha };
+            }
             k[b] = kl[l] * model.seg_factor[l] * sc;
             c[b] = cl[l] * model.seg_factor[l] * sc;
         }

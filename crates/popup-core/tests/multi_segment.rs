@@ -222,6 +222,63 @@ fn segment_stiffness_gives_the_one_joint_tip_deflection() {
     }
 }
 
+/// Static tip deflection [m] and tip rotation [rad] (both in link l's root axes) of link `l`
+/// under the 0.05 kg tip load of [`tip_deflection`], with gravity −z, for `segments` and a
+/// `root_ratio` on that link.
+fn tip_deflection_and_rotation(l: usize, segments: [usize; 2], root_ratio: f64) -> (Vec3, Vec3) {
+    let spec = tip_load_spec(l);
+    let m = Model::compile(&spec, Options { gravity: Some([0.0, 0.0, -9.81]), structure: Structure { segments, torsion: [false; 2], elements: [0, 0] }, ..Options::default() }).unwrap();
+    let mut p = Params::defaults(&m);
+    p.payload_kg = 0.05;
+    p.effects.higher_bending_modes.root_ratio[l] = root_ratio;
+    let pd = ParamData::new(&m, &p).unwrap();
+    let st = rest_state(&m, &pd, 0.0, [0.0; 3]).unwrap();
+    let root = m.motor_idx[l + 1] + 1;
+    let tip = m.payload_body + 1;
+    let pose = |q: &VecN| {
+        let f = frames(&m, q);
+        let r = f.r_wb[root].transpose() * f.r_wb[tip];
+        (f.r_wb[root].transpose() * (f.point(tip, &m.payload_com) - f.p_wb[root]), r)
+    };
+    let (p1, r1) = pose(&st.q);
+    let (p0, r0) = pose(&VecN::zeros());
+    let dr = r1 * r0.transpose();
+    (p1 - p0, Vec3::new(dr[(2, 1)] - dr[(1, 2)], dr[(0, 2)] - dr[(2, 0)], dr[(1, 0)] - dr[(0, 1)]) * 0.5)
+}
+
+#[test]
+fn root_ratio_keeps_the_tip_deflection_and_four_gives_a_cantilevers_tip_rotation() {
+    for l in 0..2 {
+        let (d1, _) = tip_deflection_and_rotation(l, [1, 1], 1.0);
+        for s in [2, 3] {
+            let mut segs = [1, 1];
+            segs[l] = s;
+            let (d_eq, th_eq) = tip_deflection_and_rotation(l, segs, 1.0);
+            for r in [0.5, 4.0, 10.0] {
+                let (d, th) = tip_deflection_and_rotation(l, segs, r);
+                // the transverse deflection (linear in the load); the axial shortening along the
+                // link (x) is second order and depends on the bent shape
+                let rel = ((d.y - d1.y).powi(2) + (d.z - d1.z).powi(2)).sqrt() / d1.norm();
+                println!("link {} S = {s} root_ratio {r}: deflection {:.6e} m (one joint {:.6e}), rotation {:.6e} rad (equal springs {:.6e})", l + 1, d.norm(), d1.norm(), th.norm(), th_eq.norm());
+                assert!(rel < 1e-4 && (d.x - d1.x).abs() < 1e-3 * d1.norm(), "link {} S = {s} root_ratio {r}: deflection {d:?} vs {d1:?}", l + 1);
+                // a stiffer root leaves more of the bending to the outer joints: more tip rotation
+                assert_eq!(th.norm() > th_eq.norm(), r > 1.0, "link {} S = {s} root_ratio {r}", l + 1);
+            }
+            // the 2-segment split 4:1 is a uniform cantilever's under a tip force: tip rotation
+            // θ = F L²/2EI with deflection δ = F L³/3EI, θ/δ 1.5/1.2 = 1.25 × the equal split's
+            if s == 2 {
+                let (d4, th4) = tip_deflection_and_rotation(l, segs, 4.0);
+                let ratio = (th4.norm() / d4.norm()) / (th_eq.norm() / d_eq.norm());
+                println!("link {}: (θ/δ)(4:1) / (θ/δ)(equal) = {ratio:.5}", l + 1);
+                assert!((ratio - 1.25).abs() < 1e-3, "link {}: {ratio}", l + 1);
+            }
+        }
+        // one segment: root_ratio is neutral
+        let (d, _) = tip_deflection_and_rotation(l, [1, 1], 4.0);
+        assert_eq!(d, d1);
+    }
+}
+
 #[test]
 fn segment_stiffness_formula() {
     let spec = ArmSpec::popup_lab();
