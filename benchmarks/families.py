@@ -1306,7 +1306,9 @@ def calibrate_near(spec: RunSpec, exc: Excitation) -> None:
         s0 = sigma(p)
         if s0 <= 0 or not math.isfinite(s0):
             break
-        p = _scaled(name, p, target / s0)
+        # at most 30× per step: an excitation that barely reaches the effect (a short run
+        # that never turns q1, for torsion) would otherwise scale it out of its range
+        p = _scaled(name, p, min(max(target / s0, 1.0 / 30.0), 30.0))
     spec.effects[name] = p
     spec.near_target_sigma = _r(target, 3)
 
@@ -1367,7 +1369,10 @@ def effect_params(name: str, engine: str, level: str, rng: np.random.Generator, 
         ks = [_r(u(0.8, 1.25)), _r(u(0.8, 1.25))]
         if engine == "popup":
             s = 3.0 if rng.random() < 0.3 else 2.0
-            return {"segments": [s, s], "k_scale": ks}
+            out: Dict[str, Any] = {"segments": [s, s], "k_scale": ks}
+            if rng.random() < 0.4:  # a stiffer root, as a continuous cantilever has (4:1 for 2 segments)
+                out["root_ratio"] = [_r(u(2.0, 6.0))] * 2
+            return out
         return {"segments": [2.0, 2.0], "k_scale": [1.0, 1.0], "split": "root 2k, mid k/2, both scaled to the one-joint arm's static sag"}
     if name == "air_drag":
         return {"cd": _r(u(1.0, 2.0) if near else u(4.0, 10.0))}
