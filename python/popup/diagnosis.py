@@ -831,7 +831,7 @@ def _gain(a: _Fitted, b: _Fitted) -> float:
     directly, with one effective sample count (``a``'s residual), less ln n_eff per extra
     parameter. Each fit's score against the nominal weighs its log-ratio by the n_eff of
     its own residual, so two good fits of the same law differ there by a percent of a large
-    score (a friction fit whose residual is 1 % whiter scored 100 more with three parameters
+    score (a friction fit whose residual was a little whiter scored 95 more with three parameters
     that landed on the default); a direct ratio does not. Fits on different output grids
     fall back to the difference of their scores."""
     if a.out.z.shape == b.out.z.shape and np.array_equal(np.asarray(a.prob.time), np.asarray(b.prob.time)):
