@@ -30,7 +30,8 @@ case "${1:-}" in
     else
       cargo test --release --workspace --exclude popup-py
     fi
-    "$PY" -m pytest -q
+    # one worker per core, each test file on one worker (its module fixtures built once)
+    "$PY" -m pytest -q -n auto --dist loadfile
     # the wheel on the oldest and newest Python on the machine, from a plain pip install
     bash scripts/check_pythons.sh
     ;;
