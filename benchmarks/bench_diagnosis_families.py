@@ -213,6 +213,39 @@ CRITERION = {
 DETECTABLE_SIGMA = 1.0
 
 
+#: The rate each count must reach (issue 18: ≥ 95 % of effect runs and of pairs, false
+#: alarms on ≤ 5 % of nominal runs; the disturbance held to the same rate).
+TARGET_RATE = 0.95
+#: Confidence of the one-sided bounds on each rate.
+RATE_CONFIDENCE = 0.95
+
+
+def rate_bounds(k: int, n: int, level: float = RATE_CONFIDENCE) -> Tuple[float, float]:
+    """One-sided Clopper–Pearson (exact binomial) bounds at ``level`` on a rate seen as
+    ``k`` successes in ``n`` runs: the rate is above ``lower`` (below ``upper``) with
+    probability ``level``. ``(0, 1)`` for ``n = 0``."""
+    if n <= 0:
+        return 0.0, 1.0
+    from scipy.stats import binomtest
+
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=2.0 * level - 1.0, method="exact")
+    return float(ci.low), float(ci.high)
+
+
+def rate_verdict(k: int, n: int, target: float = TARGET_RATE, level: float = RATE_CONFIDENCE) -> str:
+    """Whether ``k``/``n`` shows a rate ≥ ``target`` at ``level`` (its lower bound above it),
+    rules it out (its upper bound below it), or neither, with the run count that would
+    show it if no further run failed."""
+    lo, hi = rate_bounds(k, n, level)
+    head = f"one-sided {100 * level:.0f} % bounds [{100 * lo:.1f}, {100 * hi:.1f}] %"
+    if lo >= target:
+        return f"{head}: ≥ {100 * target:.0f} % shown"
+    if hi < target:
+        return f"{head}: ≥ {100 * target:.0f} % ruled out"
+    more = next((m for m in range(1, 100000) if rate_bounds(k + m, n + m, level)[0] >= target), None)
+    return f"{head}: ≥ {100 * target:.0f} % not yet shown ({more} more runs without a miss would show it)"
+
+
 def _frac(a: int, b: int) -> str:
     return f"{a}/{b}" if b else "-"
 
@@ -267,13 +300,53 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
             so = sum(1 for r in done if r["outcome"].get("says_outside"))
             extra = f"   [nothing added {na}/{len(done)}, says outside the library {so}/{len(done)}]"
         lines.append(f"{CRITERION[kind]:<64} {ok}/{len(done)} ({len(g) - len(done)} failed){extra}")
-        counts[kind] = {"ok": ok, "classified": len(done), "failed": len(g) - len(done)}
+        if kind != "undetectable":
+            # a failed diagnosis counts as a miss
+            lines.append(f"{'':<64} {rate_verdict(ok, len(g))}")
+        lo, hi = rate_bounds(ok, len(g))
+        counts[kind] = {"ok": ok, "classified": len(done), "failed": len(g) - len(done), "rate_bounds": [lo, hi]}
     eff = [r for r in rs if r["outcome"]["kind"] == "effect" and r["outcome"]["ok"] is not None]
     by = {st: [r for r in eff if r["truth"].get("style", "lab") == st] for st in F.STYLES}
     if eff:
         lines.append("(a) by excitation style: " + ", ".join(f"{st} {sum(1 for r in g if r['outcome']['ok'])}/{len(g)}" for st, g in by.items() if g))
         counts["effect_by_style"] = {st: [sum(1 for r in g if r["outcome"]["ok"]), len(g)] for st, g in by.items() if g}
     return "\n".join(lines), {"families": summary, "counts": counts}
+
+
+def _commit() -> Optional[str]:
+    """The popup checkout's commit (and ``+dirty`` with uncommitted changes), if it is a git checkout."""
+    root = Path(__file__).resolve().parents[1]
+    try:
+        c = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root, capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return (c + ("+dirty" if dirty else "")) or None
+
+
+def pool(dirs: Sequence[str], engines: Sequence[str]) -> int:
+    """The tables over every result cached under ``dirs`` (``DIR/results/*.json``), each
+    re-classified from its stored output with this script's :func:`classify`."""
+    rows: List[Dict[str, Any]] = []
+    for d in dirs:
+        files = sorted(Path(d).glob("results/*.json"))
+        if not files:
+            print(f"note: {d} has no results/*.json")
+        for f in files:
+            try:
+                row = json.loads(f.read_text())
+            except ValueError:
+                print(f"note: {f} is not JSON (skipped)")
+                continue
+            row["outcome"] = classify(row["truth"], {**row["diagnosis"], "json": row.get("json")})
+            rows.append(row)
+    commits = sorted({str(r.get("commit") or "unrecorded") for r in rows})
+    print(f"pooled {len(rows)} results from {len(dirs)} folder(s); popup commits: {', '.join(commits)}\n")
+    for eng in engines:
+        if any(r["truth"]["engine"] == eng for r in rows):
+            print(table(rows, eng)[0])
+            print()
+    return 0
 
 
 # ---------------------------------------------------------------------------- main
@@ -294,8 +367,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help=f"excitation styles cycled over the runs (comma-separated, of {', '.join(F.STYLES)}; default all)")
     ap.add_argument("--duration", type=float, default=None, help="every run this long [s] (default: drawn, 10-14 s)")
     ap.add_argument("--diagnose-args", default="", help="extra arguments for popup diagnose (one string, split on spaces)")
+    ap.add_argument("--pool", nargs="+", metavar="DIR", help="only the tables, over every result cached in these --out folders "
+                    "(re-classified with this script; e.g. several seeds pooled)")
     a = ap.parse_args(argv)
 
+    if a.pool:
+        return pool(a.pool, ["popup", "mujoco"] if a.engine == "both" else [a.engine])
     if a.report_only:
         a.resume = True
     engines = ["popup", "mujoco"] if a.engine == "both" else [a.engine]
@@ -359,7 +436,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         res = diagnose(path, timeout=a.timeout, extra=extra)
         oc = classify(truth, res)
         row = {"run": str(path), "truth": truth, "diagnosis": {k: v for k, v in res.items() if k != "json"}, "outcome": oc, "json": res["json"],
-               "truth_error": truth_error(path, truth)}
+               "truth_error": truth_error(path, truth), "commit": _commit()}
         cache.write_text(json.dumps(row, default=str))
         o = oc
         verdict = "FAILED" if o["ok"] is None else ("ok" if o["ok"] else "wrong")

@@ -328,6 +328,23 @@ def test_benchmark_classifies_diagnosis_output():
     assert bench.classify(eff, {"rc": 0, "json": js, "failure": None})["ok"] is False
 
 
+def test_rate_bounds_are_exact_binomial_bounds_that_cover_at_their_level():
+    # k = n and k = 0 have closed forms: lower = (1 - level)^(1/n), upper = 1 - (1 - level)^(1/n)
+    for n in (1, 12, 59):
+        assert bench.rate_bounds(n, n)[0] == pytest.approx(0.05 ** (1.0 / n), rel=1e-9)
+        assert bench.rate_bounds(0, n)[1] == pytest.approx(1.0 - 0.05 ** (1.0 / n), rel=1e-9)
+    # 59 clean runs are the fewest that show >= 95 % at 95 % confidence
+    assert "shown" in bench.rate_verdict(59, 59) and "not yet shown (1 more" in bench.rate_verdict(58, 58)
+    assert "ruled out" in bench.rate_verdict(0, 3)
+    # each one-sided bound holds at (at least) its level over repeated families
+    rng = np.random.default_rng(7)
+    for p, n in ((0.9, 20), (0.97, 40)):
+        ks = rng.binomial(n, p, size=400)
+        lo = np.array([bench.rate_bounds(int(k), n)[0] for k in ks])
+        hi = np.array([bench.rate_bounds(int(k), n)[1] for k in ks])
+        assert np.mean(lo <= p) >= 0.93 and np.mean(hi >= p) >= 0.93, (np.mean(lo <= p), np.mean(hi >= p))
+
+
 # ---------------------------------------------------------------------------- the diagnosis (slow)
 
 
