@@ -178,3 +178,25 @@ def test_error_is_in_noise_units_and_zero_for_the_truth(nominal, friction_run):
     assert err < dg.AT_FLOOR, per
     assert max(per.values()) < 1.1, per
     assert math.isclose(err, math.sqrt(max(np.mean(np.square(list(per.values()))) - 1.0, 0.0)))
+
+
+@pytest.mark.parametrize("kept", [0.85, 0.3])
+def test_a_small_bite_of_a_misfit_is_not_significant_however_large_its_likelihood_ratio(nominal, friction_run, kept):
+    """On a misspecified model (a systematic misfit no effect explains) the likelihood ratio
+    of a fit that removes a little of it is large; it is significant only if it explains at
+    least MIN_EXPLAINED of the systematic error (docs/effects.md, step 5)."""
+    prob = popup.ReplayProblem(nominal, friction_run)
+    z0 = prob.residuals(prob.nominal_simulation())
+    rng = np.random.default_rng(3)
+    noise = rng.standard_normal(z0.shape)
+    t = np.asarray(prob.time)[:, None]
+    misfit = 2.0 * np.sin(2 * np.pi * 0.7 * t + np.arange(z0.shape[1])[None, :])  # 2 noise sigmas, every channel
+    base, after = noise + misfit, noise + kept * misfit
+    out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=after, J=np.zeros((1, 1)),
+                                    weights=np.ones(z0.shape[1]), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
+    free = popup.estimate.free_params("payload_mass")
+    f = dg._Fitted("payload_mass", "", prob, base, free, out)
+    assert f.score > 100 * dg.SCORE_THRESHOLD and f.lr_val > 0 and f.v1 < f.v0  # huge and confirmed on held-out samples
+    assert f.explained == pytest.approx(1 - kept**2, abs=0.05)
+    assert f.significant == (f.explained >= dg.MIN_EXPLAINED)
+    assert f.significant == (kept < 0.5)

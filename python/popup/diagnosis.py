@@ -102,8 +102,15 @@ __all__ = [
 
 SCORE_THRESHOLD = 10.0
 """BIC improvement (with the effective sample count) above which an effect is significant."""
-MIN_EXPLAINED = 0.1
-"""Smallest share of the systematic error (``1 − S²_after/S²_before``) a significant effect explains."""
+MIN_EXPLAINED = 0.4
+"""Smallest share of the systematic error (``1 − S²_after/S²_before``) a significant effect
+explains. On data no model reproduces exactly the likelihood ratio overstates significance
+(the residual left is systematic, not noise), and an effect can take a small bite of a
+misfit it does not explain: on a MuJoCo nominal run at 2 kHz with 3 × quieter sensors
+(a fixed 0.45 σ₀ encoder/replay misfit left, benchmarks/README.md, session 13) backlash
+with a 3 µrad gap scored 5353 for 24 % of a 0.71 systematic error, then a −0.2 g payload
+for 20 %. Every hidden effect the families found explained at least 79 % (a near torsion
+at the fit's cap, 1.90 → 0.868 noise units)."""
 STABILITY_MARGIN = 0.5
 """A candidate runs with a step at most this fraction of its linearised stability limit."""
 AT_FLOOR = 0.3
