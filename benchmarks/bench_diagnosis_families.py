@@ -354,7 +354,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--engine", choices=("popup", "mujoco", "both"), default="both")
     ap.add_argument("--n", type=int, default=1, help="runs per family (default 1)")
-    ap.add_argument("--effects", help="comma-separated effect families (default: every effect the engine can make)")
+    ap.add_argument("--effects", help="comma-separated effect families (default: every effect the engine can make; 'none': only --kinds)")
     ap.add_argument("--kinds", default="nominal,pairs,disturbance", help="the other families to include (comma-separated; '' for none)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=1, help="runs generated / diagnosed at the same time (default 1)")
@@ -391,7 +391,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         ov["duration"] = float(a.duration)
     plan: List[Tuple[str, str]] = []
     for eng in engines:
-        effs = [e.strip() for e in a.effects.split(",")] if a.effects else F.EFFECT_FAMILIES[eng]
+        effs = [] if a.effects == "none" else [e.strip() for e in a.effects.split(",")] if a.effects else F.EFFECT_FAMILIES[eng]
         for e in effs:
             if e not in F.LIBRARY:
                 ap.error(f"--effects: unknown effect {e!r} (library: {', '.join(F.LIBRARY)})")

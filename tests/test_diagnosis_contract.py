@@ -200,3 +200,30 @@ def test_a_small_bite_of_a_misfit_is_not_significant_however_large_its_likelihoo
     assert f.explained == pytest.approx(1 - kept**2, abs=0.05)
     assert f.significant == (f.explained >= dg.MIN_EXPLAINED)
     assert f.significant == (kept < 0.5)
+
+
+def test_isolated_spikes_are_named_where_the_error_is_left(nominal, friction_run, tmp_path):
+    """Sensor glitches (a few samples far from their neighbours) are named with their share
+    of the channel's excess; a clean run has none (8σ from a running median: ~1e-14 per sample)."""
+    truth = nominal.with_effect("joint_friction", **FRICTION)
+    clean = popup.ReplayProblem(truth, friction_run)
+    _, per = clean.error()
+    # a clean replay at the floor: nothing a conclusion would name (a friction reversal a
+    # sample early can make one spike in a torque)
+    named = {c: v for c, v in clean.spikes().items() if v["share"] >= dg.SPIKE_SHARE and per[c] > dg.FLOOR_MULTIPLE}
+    assert named == {} and sum(v["count"] for v in clean.spikes().values()) <= 2, clean.spikes()
+    df = friction_run.data.copy()
+    sd = float(popup.ReplayProblem(truth, friction_run).noise["tau2"])
+    rows = [400, 1500, 3100]
+    y = df["tau2"].to_numpy().copy()
+    y[rows] += 40.0 * sd * np.array([1.0, -1.0, 1.0])
+    df["tau2"] = y
+    write_run(tmp_path, dict(friction_run.experiment), df)
+    run = popup.read_run(tmp_path)
+    prob = popup.ReplayProblem(truth, run)
+    sp = prob.spikes()
+    assert sp["tau2"]["count"] == 3 and set(sp) - {"tau2"} == set(clean.spikes()), sp
+    assert sp["tau2"]["share"] > 0.9 and sp["tau2"]["times"] == [float(prob.time[i]) for i in rows]
+    d = popup.diagnose(truth, run, effects=["payload_mass"], problem=prob)
+    assert d.significant == [] and "isolated spikes" in d.conclusion and "tau2 3 sample(s)" in d.conclusion, d.conclusion
+    assert "isolated spikes" not in popup.diagnose(truth, friction_run, effects=["payload_mass"], problem=clean).conclusion

@@ -75,7 +75,7 @@ from . import estimate as est
 from .compare import Comparison, compare
 from .exceptions import InputError, StepTooLargeError
 from .io import MeasuredRun
-from .problem import ERROR_DEFINITION, ReplayProblem
+from .problem import ERROR_DEFINITION, SPIKE_SIGMA, ReplayProblem
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
@@ -98,6 +98,7 @@ __all__ = [
     "VARIANTS",
     "JOINT_TOP",
     "FLOOR_MULTIPLE",
+    "SPIKE_SHARE",
 ]
 
 SCORE_THRESHOLD = 10.0
@@ -120,6 +121,11 @@ AT_FLOOR = 0.3
 JOINT_TOP = 3
 """In a round with effects already added, the number of best-screened candidates refitted
 jointly with them (the others keep their screened fit, earlier effects held)."""
+
+SPIKE_SHARE = 0.5
+"""Share of a channel's excess above which the unexplained error names its isolated spikes
+(:meth:`ReplayProblem.spikes`), for a channel above :data:`FLOOR_MULTIPLE` × its noise (a
+replay at the floor can have one: a friction reversal a sample early is a one-sample step)."""
 
 FLOOR_MULTIPLE = 1.2
 """After an effect was added, :func:`improve` stops when the systematic error is at most
@@ -992,6 +998,17 @@ def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
             txt += f"; {c0}'s residual mostly in {sp['dominant_band']} (peak {float(sp['peak_hz']):.3g} Hz)"
     except Exception:  # noqa: BLE001 - a missing view must not hide the finding
         pass
+    prob = d.problem
+    if prob is not None:
+        try:
+            sp = prob.spikes(prob.residuals(prob.nominal_simulation()))
+        except Exception:  # noqa: BLE001
+            sp = {}
+        big = sorted(((c, v) for c, v in sp.items() if v["share"] >= SPIKE_SHARE and per.get(c, 0.0) > FLOOR_MULTIPLE), key=lambda kv: -kv[1]["share"])
+        if big:
+            txt += "; isolated spikes (sensor glitches, or an effect sharper than a sample): " + ", ".join(
+                f"{c} {v['count']} sample(s) > {SPIKE_SIGMA:g}σ from their neighbours (first at t = {v['times'][0]:.4g} s), "
+                f"{100 * v['share']:.0f} % of its excess" for c, v in big[:3])
     return txt
 
 
