@@ -227,3 +227,8 @@ def test_isolated_spikes_are_named_where_the_error_is_left(nominal, friction_run
     d = popup.diagnose(truth, run, effects=["payload_mass"], problem=prob)
     assert d.significant == [] and "isolated spikes" in d.conclusion and "tau2 3 sample(s)" in d.conclusion, d.conclusion
     assert "isolated spikes" not in popup.diagnose(truth, friction_run, effects=["payload_mass"], problem=clean).conclusion
+    # and in the JSON, per channel
+    js = popup.improve(truth, run, effects=["payload_mass"], max_rounds=1).to_dict()
+    assert js["channels"]["tau2"]["spikes"] == 3 and js["channels"]["tau2"]["spike_times"] == sp["tau2"]["times"], js["channels"]["tau2"]
+    assert js["channels"]["tau2"]["spike_share"] > 0.9 and "isolated spikes" in js["conclusion"]
+    json.dumps(js, allow_nan=False)

@@ -553,11 +553,18 @@ class History:
     def to_dict(self) -> Dict[str, Any]:
         """The CLI's ``--json`` contract: ``run``, ``nominal_error``, ``error_definition``,
         ``noise`` (σ per channel), ``channels`` (per channel: noise, noise multiple before
-        and after, at the noise floor), ``suspects`` (first round, every effect ranked),
+        and after, at the noise floor, the nominal residual's isolated spikes: count, first
+        times [s], share of the excess; :meth:`ReplayProblem.spikes`), ``suspects`` (first round, every effect ranked),
         ``history`` (each step's effects and error), ``rounds``, ``conclusion``,
         ``complete`` and, when a round failed, ``error``."""
         first = self.diagnoses[0] if self.diagnoses else None
         floor = first.at_floor if first else []
+        spikes: Dict[str, Dict[str, Any]] = {}
+        if first is not None and first.problem is not None:
+            try:
+                spikes = first.problem.spikes()
+            except Exception:  # noqa: BLE001 - the numbers still go out
+                spikes = {}
         out: Dict[str, Any] = {
             "run": self.run,
             "nominal_error": _num(self.steps[0].error),
@@ -569,6 +576,9 @@ class History:
                     "noise_multiple_nominal": _num(self.steps[0].channel_error.get(c)),
                     "noise_multiple_final": _num(self.steps[-1].channel_error.get(c)),
                     "at_noise_floor": c in floor,
+                    "spikes": spikes.get(c, {}).get("count", 0),
+                    "spike_times": spikes.get(c, {}).get("times", []),
+                    "spike_share": _num(spikes.get(c, {}).get("share", 0.0)),
                 }
                 for c in self.steps[0].channel_error
             },
