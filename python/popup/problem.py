@@ -576,7 +576,6 @@ class ReplayProblem:
             return math.inf, {c: math.inf for c in self.channels}
         return systematic(ms), {c: float(math.sqrt(m)) for c, m in zip(self.channels, ms)}
 
-
     def spikes(self, z: Optional[np.ndarray] = None) -> Dict[str, Dict[str, Any]]:
         """Isolated spikes in the residual ``z`` (n, C) in noise units (default: the model as
         given): per channel with any, the samples further than :data:`SPIKE_SIGMA` from the
