@@ -21,6 +21,13 @@ What it holds (set up once, reused by every fit):
 * **Noise floor** σ_c of each channel (:func:`popup.noise.noise_std` of the nominal
   model's residual: divided differences remove the smooth systematic part; strides up
   to :data:`popup.noise.CORRELATION_S` find noise coloured by a sensor's low-pass).
+* **Encoder floor** (encoder replay, :attr:`ReplayProblem.encoder_floor`): the replay
+  error that the encoder's own error causes in each channel, by a parametric bootstrap
+  (the smoothed angles re-measured :data:`ENCODER_DRAWS` times as the encoder measures:
+  quantised at its step on a random grid offset, with the white noise estimated beyond
+  the quantisation; smoothed again; replayed). A 12-bit encoder on a quiet IMU leaves
+  the replay with the true model above the IMU's noise: that is a limit of the data, not
+  a missing effect (``floor = sqrt(σ_c² + σ_enc,c²)``, :meth:`ReplayProblem.floor_multiples`).
 * **Training and validation samples**: the run cut in :data:`N_BLOCKS` equal time
   blocks; blocks :data:`VALIDATION_BLOCKS` are held out (30 %, spread over the run so
   that they see every kind of excitation). Fits use the training samples; an effect is
@@ -64,6 +71,7 @@ __all__ = [
     "DEFAULT_CHANNELS",
     "SPIKE_SIGMA",
     "SPIKE_WINDOW",
+    "ENCODER_DRAWS",
     "Shifted",
 ]
 
@@ -97,6 +105,9 @@ FLOOR_SIGNAL_RATIO = 1.5
 #: isolated spike (:meth:`ReplayProblem.spikes`): with Gaussian noise one sample in ~10¹⁴.
 SPIKE_SIGMA = 8.0
 SPIKE_WINDOW = 7
+#: Draws of the encoder's error in the bootstrap of :attr:`ReplayProblem.encoder_floor`.
+ENCODER_DRAWS = 6
+_ENCODER_SEED = 0xE1F  # fixed: the same run gives the same floor, bit for bit
 
 
 # ---------------------------------------------------------------------------- setup
@@ -298,6 +309,7 @@ class ReplayProblem:
     sigma: np.ndarray
     _count: List[int]
     _nominal: Optional[Tuple[np.ndarray, Any]]
+    _enc: List[Optional[np.ndarray]]
 
     def __init__(
         self,
@@ -333,10 +345,12 @@ class ReplayProblem:
             self.iq, self.iv = p.iq, p.iv
             self.task, self.q0, self.t0, self.duration = p.task, p.q0, p.t0, p.duration
             self.sigma = p.sigma
+            self._enc = p._enc  # the encoder's error is the run's: shared with every derived problem
             self._nominal = None
             return
         notes: List[str] = []
         self.notes = notes
+        self._enc = [None]
         self.channels = select_channels(run, channels, self.where, notes, self.closed)
         self.time = np.asarray(run.time, dtype=np.float64)
         self.measured = np.column_stack([np.asarray(run.channel(c), dtype=np.float64) for c in self.channels])
@@ -454,6 +468,70 @@ class ReplayProblem:
         return {c: float(s) for c, s in zip(self.channels, self.sigma)}
 
     @property
+    def encoder_sigma(self) -> np.ndarray:
+        """(C,) std [channel unit] of the replay error that the encoder's own error causes
+        (module docs: parametric bootstrap; computed once per run, on first use); zeros for
+        a reference replay or an encoder replayed as measured."""
+        if self._enc[0] is None:
+            self._enc[0] = self._encoder_bootstrap()
+        return self._enc[0]
+
+    @property
+    def encoder_floor(self) -> Dict[str, float]:
+        """Per channel, the replay error the encoder's own error causes, as a multiple of
+        the channel's noise: ``sqrt(1 + (σ_enc,c/σ_c)²)`` (1 = the encoder adds nothing)."""
+        e = self.encoder_sigma / self.sigma
+        return {c: float(math.sqrt(1.0 + v * v)) for c, v in zip(self.channels, e)}
+
+    def floor_multiples(self, per: Dict[str, float]) -> Dict[str, float]:
+        """Noise multiples ``per`` (channel → r_c) as multiples of each channel's whole
+        floor, the noise and the encoder's replay error: ``r_c / sqrt(1 + (σ_enc,c/σ_c)²)``."""
+        f = self.encoder_floor
+        return {c: float(v) / f.get(c, 1.0) for c, v in per.items()}
+
+    def floor_error(self, per: Dict[str, float]) -> float:
+        """The systematic error S (:data:`ERROR_DEFINITION`) above the whole floor (noise and
+        encoder) of the noise multiples ``per``."""
+        fm = [v for v in self.floor_multiples(per).values()]
+        if not fm or not all(math.isfinite(v) for v in fm):
+            return math.inf
+        return systematic(np.square(np.asarray(fm)))
+
+    def _encoder_bootstrap(self) -> np.ndarray:
+        C = len(self.channels)
+        sm = self.smoothing
+        if self.closed or sm is None or not any(v is not None for v in sm.params.get("lam", [None] * 3)):
+            return np.zeros(C)
+        from .smoothing import smooth_encoder
+
+        par = sm.params
+        rng = np.random.default_rng(_ENCODER_SEED)
+        t, g = self.t_enc, self.q_enc
+        base = self._replay_channels(g)
+        acc, n = np.zeros(C), 0
+        for _ in range(ENCODER_DRAWS):
+            y = g.copy()
+            for j in range(3):
+                if par["lam"][j] is None:
+                    continue
+                step, wn = par["resolution"][j], par["noise"][j]
+                # the white noise the differences see beyond the quantisation's Δ²/12 (smoothing step 3)
+                w = math.sqrt(max((wn or 0.0) ** 2 - (0.0 if step is None else step**2 / 12.0), 0.0))
+                if w > 0:
+                    y[:, j] += w * rng.standard_normal(len(t))
+                if step is not None:
+                    y[:, j] = np.round((y[:, j] + rng.uniform(-0.5, 0.5) * step) / step) * step
+            try:
+                d = self._replay_channels(smooth_encoder(t, y).q) - base
+            except Exception:  # noqa: BLE001 - a draw the engine refuses is left out
+                continue
+            d = d[self.used]
+            with np.errstate(invalid="ignore"):
+                acc += np.nan_to_num(np.nanmean(d * d, axis=0))
+            n += 1
+        return np.sqrt(acc / n) if n else np.zeros(C)
+
+    @property
     def at_floor(self) -> List[str]:
         """Channels whose measured signal is at its noise floor (std < 1.5 σ)."""
         out = []
@@ -522,15 +600,24 @@ class ReplayProblem:
             else:
                 res = m.replay(self.t_enc, self.q_enc, sample_rate=self.sample_rate, initial_q=self.iq, initial_v=self.iv)
             self.nfev += 1
-            t_sim = res.time
-            same = len(t_sim) == len(self.time) and np.array_equal(t_sim, self.time)
-            inside = (self.time >= t_sim[0] - 1e-12) & (self.time <= t_sim[-1] + 1e-12)
-            out = np.full((len(self.time), len(self.channels)), np.nan)
-            for j, c in enumerate(self.channels):
-                y = res.channel(c)
-                out[:, j] = y if same else np.where(inside, np.interp(self.time, t_sim, y), np.nan)
-            self._nominal = (out, res)
+            self._nominal = (self._on_stamps(res), res)
         return self._nominal[0]
+
+    def _on_stamps(self, res: Any) -> np.ndarray:
+        t_sim = res.time
+        same = len(t_sim) == len(self.time) and np.array_equal(t_sim, self.time)
+        inside = (self.time >= t_sim[0] - 1e-12) & (self.time <= t_sim[-1] + 1e-12)
+        out = np.full((len(self.time), len(self.channels)), np.nan)
+        for j, c in enumerate(self.channels):
+            y = res.channel(c)
+            out[:, j] = y if same else np.where(inside, np.interp(self.time, t_sim, y), np.nan)
+        return out
+
+    def _replay_channels(self, q_enc: np.ndarray) -> np.ndarray:
+        """(n, C) the model replaying encoder angles ``q_enc`` (on :attr:`t_enc`)."""
+        res = self.model.replay(self.t_enc, q_enc, sample_rate=self.sample_rate, initial_q=self.iq, initial_v=self.iv)
+        self.nfev += 1
+        return self._on_stamps(res)
 
     def nominal_result(self) -> Any:
         """The nominal replay's full result (a :class:`~popup.SimResult`, or the closed-loop
