@@ -345,6 +345,64 @@ def test_rate_bounds_are_exact_binomial_bounds_that_cover_at_their_level():
         assert np.mean(lo <= p) >= 0.93 and np.mean(hi >= p) >= 0.93, (np.mean(lo <= p), np.mean(hi >= p))
 
 
+# ---------------------------------------------------------------------------- the encoder floor
+
+
+def test_encoder_floor_is_the_replay_error_a_coarse_encoder_leaves(tmp_path):
+    """popup's own engine replays its truth exactly but for the encoder: on a family of
+    nominal runs with 12-bit encoders and quiet sensors (× 0.35) the true model's replay is
+    up to 1.4 × the noise, and the bootstrap's encoder floor predicts each channel's excess
+    r² − 1 within a factor of 3 (median within 40 %), so that the model is at its floor;
+    with 16-bit encoders the floor is nothing. Deterministic: a second set-up of the same
+    run gives the same bits."""
+    from popup.diagnosis import AT_FLOOR, FLOOR_MULTIPLE
+    from popup.problem import ReplayProblem
+
+    ratios, above = [], 0
+    for bits in (12, 16):
+        for i, sp in enumerate(F.family_specs("nominal", "popup", 3, 5, duration=6.0, channels="full", noise_scale=0.35,
+                                              encoder_bits=bits, noise_lowpass_hz=0.0)):
+            path, _ = F.make_run(sp, tmp_path / f"{bits}-{i}")
+            run = _read(path)
+            prob = ReplayProblem(run.model(), run, threads=1)
+            err, per = prob.error()
+            ef = prob.encoder_floor
+            where = f"{bits} bits, {sp.rate:g} Hz {sp.style}: noise multiples {per}, encoder floor {ef}"
+            if bits == 16:
+                assert max(ef.values()) < 1.02, where
+                continue
+            again = ReplayProblem(run.model(), run, threads=1)
+            assert again.encoder_sigma.tobytes() == prob.encoder_sigma.tobytes()
+            above += err > AT_FLOOR or max(per.values()) > FLOOR_MULTIPLE
+            ratios += [(ef[c] ** 2 - 1) / (per[c] ** 2 - 1) for c in prob.channels if per[c] ** 2 - 1 > 0.2]
+            fm = prob.floor_multiples(per)
+            assert prob.floor_error(per) <= AT_FLOOR and max(fm.values()) <= FLOOR_MULTIPLE, where
+    assert above >= 2  # the noise alone would not call these replays at the floor
+    assert len(ratios) >= 4 and all(1 / 3 < r < 3 for r in ratios), ratios
+    assert 0.6 < float(np.median(ratios)) < 1.4, ratios
+
+
+def test_an_effect_fitted_to_a_coarse_encoders_replay_error_is_not_a_finding(tmp_path):
+    """Another engine's nominal run with 12-bit encoders and quiet sensors (session 13's one
+    false alarm): a payload fitted there explains half the error above the noise with a
+    huge likelihood ratio, but the model is at its floor once the encoder's replay error
+    is counted, and nothing is significant."""
+    pytest.importorskip("mujoco")
+    from popup import diagnosis as dg
+
+    sp = F.family_specs("nominal", "mujoco", 2, 47)[1]
+    assert sp.encoder_bits == 12 and sp.noise_scale < 0.5
+    path, _ = F.make_run(sp, tmp_path)
+    run = _read(path)
+    d = popup.diagnose(run.model(), run, effects=["payload_mass"], threads=1)
+    s = d.suspects[0]
+    assert d.nominal_error > dg.AT_FLOOR, d.channel_error  # above the noise alone
+    assert s.score > dg.SCORE_THRESHOLD and s.explained >= dg.MIN_EXPLAINED, (s.score, s.explained)
+    assert d.model_at_floor and not s.significant and "at its floor" in s.message, s.message
+    assert max(d.encoder_floor.values()) > 1.1 and "encoder" in d.conclusion, d.conclusion
+    assert d.to_dict()["model_at_floor"] is True
+
+
 # ---------------------------------------------------------------------------- the diagnosis (slow)
 
 
