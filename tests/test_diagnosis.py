@@ -221,8 +221,16 @@ def test_held_backlash_is_diagnosed_as_the_play_operator(nominal, traj, tmp_path
 
 def test_no_hidden_effect_gives_no_significant_suspect(nominal, traj, tmp_path_factory):
     run = _run(nominal, traj, tmp_path_factory, {}, "nominal")
-    d = popup.diagnose(nominal, run)
+    # at its floor: the candidates are not tried, each saying why, in a few replays
+    quick = popup.diagnose(nominal, run)
+    assert quick.model_at_floor and quick.significant == [] and "at the noise floor" in quick.conclusion
+    assert len(quick.suspects) == len(fx.EFFECT_NAMES)
+    assert all(not s.tested and s.message.startswith("not tried: the model is at its floor") for s in quick.suspects)
+    assert "incomplete" not in quick.conclusion and quick.n_rollouts < 20
+    # fitted anyway: none would have been significant, even without the floor's gate
+    d = popup.diagnose(nominal, run, rank_at_floor=True)
     assert d.significant == [], d.to_pandas()[["effect", "significant", "score", "error_after"]]
+    assert not any("at its floor" in s.message for s in d.suspects), [(s.effect, s.score, s.message) for s in d.suspects]
     assert "at the noise floor" in d.conclusion
     assert len(d.suspects) == len(fx.EFFECT_NAMES)
     assert all(s.tested for s in d.suspects), [(s.effect, s.message) for s in d.untested]

@@ -394,7 +394,9 @@ def test_an_effect_fitted_to_a_coarse_encoders_replay_error_is_not_a_finding(tmp
     assert sp.encoder_bits == 12 and sp.noise_scale < 0.5
     path, _ = F.make_run(sp, tmp_path)
     run = _read(path)
-    d = popup.diagnose(run.model(), run, effects=["payload_mass"], threads=1)
+    quick = popup.diagnose(run.model(), run, effects=["payload_mass"], threads=1)
+    assert quick.model_at_floor and not quick.suspects[0].tested and "encoder" in quick.conclusion, quick.conclusion
+    d = popup.diagnose(run.model(), run, effects=["payload_mass"], threads=1, rank_at_floor=True)
     s = d.suspects[0]
     assert d.nominal_error > dg.AT_FLOOR, d.channel_error  # above the noise alone
     assert s.score > dg.SCORE_THRESHOLD and s.explained >= dg.MIN_EXPLAINED, (s.score, s.explained)

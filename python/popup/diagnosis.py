@@ -57,7 +57,9 @@ and the replay error the encoder's own error causes
 how well q̈, and so the replayed torques and accelerations, can be known: with a 12-bit
 encoder and a quiet IMU the true model replays at up to 1.3 × the IMU's noise, and
 an effect fitted there (a +0.8 g payload for 54 % of it, on a MuJoCo run) fits the
-encoder, not the arm. The candidates are still fitted and ranked; none is significant.
+encoder, not the arm. The candidates are then not tried (each says why; the answer takes
+seconds), or, with ``rank_at_floor=True`` (``--rank-at-floor``), fitted and ranked with
+none significant.
 
 **Identifiability.** Each fit's scaled Fisher matrix is checked (rank, condition,
 correlations, bounds); parameters the run cannot pin down get an infinite interval and are
@@ -934,6 +936,7 @@ def diagnose(
     problem: Optional[ReplayProblem] = None,
     progress: Optional[Progress] = None,
     refit: Optional[Mapping[str, Sequence[str]]] = None,
+    rank_at_floor: bool = False,
 ) -> Diagnosis:
     """Rank every effect of the library (or ``effects``) by how much of the model's
     systematic error on ``run`` it explains, each fitted, validated on held-out samples,
@@ -944,6 +947,8 @@ def diagnose(
     ``progress``: called with ``{"effect", "done", "total"}`` before each effect.
     ``refit``: effects of ``model`` (``{effect: [parameter names]}``, as :func:`improve`
     added them) refitted jointly with each candidate.
+    ``rank_at_floor``: for a model at its floor (module docs), fit and rank the candidates
+    anyway (none is significant); by default they are not tried, each saying why.
     """
     t_start = time.perf_counter()
     names = list(fx.EFFECT_NAMES if effects is None else effects)
@@ -963,6 +968,15 @@ def diagnose(
     todo = [n for n in names if n not in have]
     suspects: List[Suspect] = []
     evs: Dict[str, Dict[str, Any]] = {}
+    floor = _model_at_floor(prob, e0, per0)
+    if floor and not rank_at_floor:
+        why = (f"not tried: the model is at its floor (systematic error {prob.floor_error(per0):.3g} above the noise and the "
+               f"encoder's replay error, every channel within {FLOOR_MULTIPLE:g}× of it): nothing is left for an effect to "
+               "explain (rank_at_floor=True, or --rank-at-floor, fits them anyway)")
+        todo = []
+        for name in names:
+            if name not in have:
+                suspects.append(Suspect(name, False, -math.inf, {}, {}, e0, math.nan, {}, _evidence(name, cmp, prob), tested=False, message=why))
     # with earlier effects to refit, every candidate is first screened with them held, and
     # only the JOINT_TOP best are refitted jointly (the refit's extra Jacobian columns are
     # most of a round's cost, and the ranking's tail does not need them)
@@ -980,8 +994,7 @@ def diagnose(
             if s.tested and math.isfinite(s.score):
                 suspects[i] = _refit_jointly(prob, s, evs[s.effect], max_iter, also)
         suspects.sort(key=_rank_key)
-    floor = _model_at_floor(prob, e0, per0)
-    if floor:
+    if floor and todo:
         why = (f"not significant: the model is at its floor (systematic error {prob.floor_error(per0):.3g} above the noise "
                f"and the encoder's replay error, every channel within {FLOOR_MULTIPLE:g}× of it)")
         for s in suspects:
@@ -1027,7 +1040,7 @@ def _round_conclusion(d: Diagnosis) -> str:
                      f"{d.floor_error:.3g} above the floor; {_encoder_text(d.encoder_floor)}): no library effect is significant")
     else:
         parts.append(f"no library effect explains the systematic error of {d.nominal_error:.3g} noise units: it is not explained by the library ({_where(d)})")
-    if d.untested:
+    if d.untested and not d.model_at_floor:
         parts.append("the ranking is incomplete: " + "; ".join(f"{s.effect} {s.message}" for s in d.untested))
     return "; ".join(parts)
 
@@ -1075,12 +1088,14 @@ def improve(
     threads: int = 0,
     max_iter: int = 15,
     progress: Optional[Progress] = None,
+    rank_at_floor: bool = False,
 ) -> History:
     """The loop: diagnose, add the top significant effect, refit every added effect
     jointly, diagnose again; until no effect is significant or ``max_rounds``.
 
     Nothing is lost: a failure in round k returns rounds 1..k−1 with ``History.error``
-    set. Errors in the set-up (a run the model cannot replay at all) are raised."""
+    set. Errors in the set-up (a run the model cannot replay at all) are raised.
+    ``rank_at_floor``: as :func:`diagnose`, for a model at its floor from the start."""
     t_start = time.perf_counter()
     for n in effects or []:
         fx.normalize(n, {})  # bad input is refused before any work
@@ -1101,7 +1116,7 @@ def improve(
             progress(dict(info, round=rnd + 1))
 
     try:
-        d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog)
+        d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, rank_at_floor=rank_at_floor)
         diags.append(d)
         while d.best is not None and rnd < max_rounds:
             rnd += 1
@@ -1260,7 +1275,7 @@ def _conclude(h: History, max_rounds: int) -> str:
         else:
             left = f"a systematic error of {last.error:.3g} noise units is left that is not explained by the library ({where})"
     parts.append(left)
-    untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses for s in d.untested})
+    untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses if not d.model_at_floor for s in d.untested})
     if untested:
         parts.append("the ranking is incomplete: " + "; ".join(untested))
     if h.error:
@@ -1318,6 +1333,8 @@ def cli_main(argv: Sequence[str]) -> int:
     ap.add_argument("--effects", help="comma-separated effects to try (default: the whole library)")
     ap.add_argument("--channels", help="comma-separated channels to compare (default: every comparable one)")
     ap.add_argument("--threads", type=int, default=0, help="rollout threads (0 = all cores)")
+    ap.add_argument("--rank-at-floor", action="store_true",
+                    help="fit and rank every effect even when the model is at its floor (noise and encoder); by default they are not tried")
     ap.add_argument("--no-progress", action="store_true", help="no progress line on stderr (it is off anyway with --json or when stderr is not a terminal)")
     a = ap.parse_args(list(argv))
     show = not a.json and not a.no_progress and sys.stderr.isatty()
@@ -1327,7 +1344,8 @@ def cli_main(argv: Sequence[str]) -> int:
         model = run.model()
         effects = [e.strip() for e in a.effects.split(",")] if a.effects else None
         channels = [c.strip() for c in a.channels.split(",")] if a.channels else None
-        h = improve(model, run, max_rounds=a.max_rounds, effects=effects, channels=channels, threads=a.threads, progress=bar)
+        h = improve(model, run, max_rounds=a.max_rounds, effects=effects, channels=channels, threads=a.threads, progress=bar,
+                    rank_at_floor=a.rank_at_floor)
     except (PopupError, FileNotFoundError, NotADirectoryError) as e:
         if bar is not None:
             bar.close()
