@@ -106,3 +106,31 @@ def test_rollout_count_is_the_number_of_simulations_run(monkeypatch):
     d = popup.diagnose(model, run, effects=["payload_mass", "higher_bending_modes"])
     assert d.n_rollouts == sum(counted)
     assert [s.n_rollouts for s in d.suspects] and all(s.n_rollouts > 2 for s in d.suspects)
+
+
+def test_a_run_at_its_floor_is_answered_without_fitting_and_says_why(tmp_path):
+    """A nominal run (popup's engine, 12-bit encoders) is at its floor: `popup diagnose`
+    tries nothing, says so per effect and in the conclusion, and exits 0 complete; the
+    report's table shows the encoder floor; `--rank-at-floor` fits the candidates anyway."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import families as F
+
+    sp = F.family_specs("nominal", "popup", 1, 3, duration=4.0, channels="full", encoder_bits=12, noise_scale=1.0, style="lab")[0]
+    path, _ = F.make_run(sp, tmp_path)
+    html_out = tmp_path / "r.html"
+    r = subprocess.run([sys.executable, "-m", "popup", "diagnose", str(path), "--json", "--report", str(html_out)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["complete"] is True and d["history"][-1]["effects"] == []
+    assert d["rounds"][0]["model_at_floor"] is True
+    assert len(d["suspects"]) == len(popup.effects.EFFECT_NAMES)
+    assert all(s["tested"] is False and s["message"].startswith("not tried: the model is at its floor") for s in d["suspects"])
+    assert "floor" in d["conclusion"] and "incomplete" not in d["conclusion"]
+    assert all(v["encoder_floor"] >= 1.0 for v in d["channels"].values())
+    assert "encoder floor" in html_out.read_text()
+    r2 = subprocess.run([sys.executable, "-m", "popup", "diagnose", str(path), "--json", "--rank-at-floor", "--effects", "payload_mass"],
+                        capture_output=True, text=True, timeout=600)
+    assert r2.returncode == 0, r2.stderr
+    d2 = json.loads(r2.stdout)
+    assert [s["tested"] for s in d2["suspects"]] == [True] and d2["history"][-1]["effects"] == []
