@@ -477,6 +477,24 @@ class ReplayProblem:
         return self._enc[0]
 
     @property
+    def encoder_width(self) -> np.ndarray:
+        """(3,) width [rad] of one encoder reading per joint: its quantisation step, or
+        √12 × its white-noise std (a uniform error of the same variance) when that is wider;
+        a joint whose reading never changes shows no step and gets the widest of the others;
+        0 for an exact encoder or a reference replay. Motion inside it is not seen."""
+        sm = self.smoothing
+        w = np.zeros(3)
+        if self.closed or sm is None:
+            return w
+        for j in range(3):
+            step, wn = sm.params.get("resolution", [None] * 3)[j], sm.params.get("noise", [None] * 3)[j]
+            w[j] = max(step or 0.0, math.sqrt(12.0) * (wn or 0.0))
+        q = np.asarray(self.q_enc_raw)
+        held = np.all(q == q[:1], axis=0)
+        w[held & (w == 0)] = float(w.max())
+        return w
+
+    @property
     def encoder_floor(self) -> Dict[str, float]:
         """Per channel, the replay error the encoder's own error causes, as a multiple of
         the channel's noise: ``sqrt(1 + (σ_enc,c/σ_c)²)`` (1 = the encoder adds nothing)."""
