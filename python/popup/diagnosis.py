@@ -63,10 +63,10 @@ none significant.
 
 **What the encoder cannot see.** A coarse encoder also hides motion: a held motor that
 yields to the links' ringing by a fraction of a step (a servo's finite stiffness) never
-changes its reading, and the replay holds it still. A backlash narrower than one reading
-(:attr:`ReplayProblem.encoder_width`) is room for exactly that motion, and is not
-significant (on MuJoCo nominal runs with 12- and 14-bit encoders and quiet sensors, gaps of
-2-4 µrad, a quarter to half a step, took 25-78 % of the error).
+changes its reading, and the replay holds it still. A backlash narrower than
+:data:`PLAY_READINGS` readings (:attr:`ReplayProblem.encoder_width`) is room for exactly
+that motion, and is not significant (on MuJoCo nominal runs with 12- and 14-bit encoders
+and quiet sensors, gaps of 1.5-4 µrad, a quarter to one step, took 44-95 % of the error).
 
 **Identifiability.** Each fit's scaled Fisher matrix is checked (rank, condition,
 correlations, bounds); parameters the run cannot pin down get an infinite interval and are
@@ -117,6 +117,7 @@ __all__ = [
     "JOINT_TOP",
     "FLOOR_MULTIPLE",
     "SPIKE_SHARE",
+    "PLAY_READINGS",
 ]
 
 SCORE_THRESHOLD = 10.0
@@ -711,10 +712,14 @@ def _step_for(prob: ReplayProblem, m: "Model", check: "Model") -> float:
     return period / k
 
 
-#: Effect parameters [rad per motor joint] that are play in a joint: a play narrower than one
-#: encoder reading (:attr:`ReplayProblem.encoder_width`) cannot be told from the joint moving
-#: unseen inside its reading (a servo yielding to the links' ringing), module docs.
+#: Effect parameters [rad per motor joint] that are play in a joint: a play narrower than
+#: :data:`PLAY_READINGS` encoder readings (:attr:`ReplayProblem.encoder_width`) cannot be told
+#: from the joint moving unseen inside its reading (a servo yielding to the links' ringing).
 _PLAY = {"backlash": "gap"}
+PLAY_READINGS = 2.0
+"""Readings a play must span to be told from unseen motion: the replayed angle is known only
+to within about one reading either way (up to 1.09 readings off MuJoCo's true angle on a
+12-bit trapezoid run), so the link's unseen motion relative to it spans two."""
 
 
 def _unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
@@ -724,10 +729,10 @@ def _unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
         return ""
     w = prob.encoder_width
     gap = np.asarray(flat[fx.EFFECTS[name].params[key].slice], dtype=float)
-    if not (np.any(w > 0) and np.all(gap < w)):
+    if not (np.any(w > 0) and np.all(gap < PLAY_READINGS * w)):
         return ""
-    return (f"not significant: its {key} ({_fmt_list(gap)} rad) is narrower than one encoder reading "
-            f"({_fmt_list(w)} rad): a joint moving unseen inside its reading looks the same")
+    return (f"not significant: its {key} ({_fmt_list(gap)} rad) is narrower than {PLAY_READINGS:g} encoder readings "
+            f"({_fmt_list(w)} rad each): a joint moving unseen inside its reading looks the same")
 
 
 def _rank_key(s: Suspect) -> Tuple[int, int, float]:
