@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -435,6 +436,36 @@ def test_an_effect_fitted_to_a_coarse_encoders_replay_error_is_not_a_finding(tmp
     assert d.model_at_floor and not s.significant and "at its floor" in s.message, s.message
     assert max(d.encoder_floor.values()) > 1.1 and "encoder" in d.conclusion, d.conclusion
     assert d.to_dict()["model_at_floor"] is True
+
+
+def test_a_play_narrower_than_the_encoders_readings_is_not_a_finding(tmp_path):
+    """A MuJoCo nominal run with 14-bit encoders and quiet sensors (noise × 0.45): its servos
+    let the held motors yield to the links by a fraction of a reading, which the replay holds
+    still. A backlash with µrad gaps fits that (its likelihood ratio and share of the error
+    would make it a finding), but a play narrower than two readings is not significant; the
+    same rule passes a play three readings wide."""
+    pytest.importorskip("mujoco")
+    from popup import diagnosis as dg
+    from popup import effects as fx
+
+    sp = F.family_specs("nominal", "mujoco", 50, 61)[9]
+    assert sp.encoder_bits == 14 and sp.noise_scale < 0.5
+    path, _ = F.make_run(sp, tmp_path)
+    run = _read(path)
+    d = popup.diagnose(run.model(), run, effects=["backlash"], threads=1)
+    s = d["backlash"]
+    w = d.problem.encoder_width
+    assert np.allclose(w, F.encoder_resolution(14), rtol=0.02), w
+    # the held law (a play operator) fits it: a large score, refused for its µrad gaps
+    m = re.search(r"variant held link side \(play operator\) not preferred \(score ([0-9.]+).*?narrower than 2 encoder readings", s.message)
+    assert m and float(m.group(1)) > 10 * dg.SCORE_THRESHOLD, s.message
+    assert not s.significant and d.best is None, s.message
+    flat = run.model().effects_flat.copy()
+    sl = fx.EFFECTS["backlash"].params["gap"].slice
+    flat[sl] = 3.0 * w
+    assert dg._unresolved_play(d.problem, "backlash", flat) == ""
+    flat[sl] = 1.5 * w
+    assert "narrower" in dg._unresolved_play(d.problem, "backlash", flat)
 
 
 # ---------------------------------------------------------------------------- the diagnosis (slow)

@@ -904,7 +904,8 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
             notes.append(f"variant {var['name']} preferred (score {vf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f})")
             best = vf
         else:
-            notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f})")
+            notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f}"
+                         + (f"; {vf.unresolved}" if vf.unresolved else "") + ")")
     return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
 
 
