@@ -525,7 +525,7 @@ class ReplayProblem:
         par = sm.params
         rng = np.random.default_rng(_ENCODER_SEED)
         t, g = self.t_enc, self.q_enc
-        base = self._replay_channels(g)
+        base = self.nominal_simulation()
         acc, n = np.zeros(C), 0
         for _ in range(ENCODER_DRAWS):
             y = g.copy()
