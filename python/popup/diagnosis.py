@@ -731,8 +731,8 @@ def _unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
     gap = np.asarray(flat[fx.EFFECTS[name].params[key].slice], dtype=float)
     if not (np.any(w > 0) and np.all(gap < PLAY_READINGS * w)):
         return ""
-    return (f"not significant: its {key} ({_fmt_list(gap)} rad) is narrower than {PLAY_READINGS:g} encoder readings "
-            f"({_fmt_list(w)} rad each): a joint moving unseen inside its reading looks the same")
+    return (f"not significant: its {key} ({_fmt_list(gap.tolist())} rad) is narrower than {PLAY_READINGS:g} encoder readings "
+            f"({_fmt_list(w.tolist())} rad each): a joint moving unseen inside its reading looks the same")
 
 
 def _rank_key(s: Suspect) -> Tuple[int, int, float]:

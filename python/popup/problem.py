@@ -472,9 +472,10 @@ class ReplayProblem:
         """(C,) std [channel unit] of the replay error that the encoder's own error causes
         (module docs: parametric bootstrap; computed once per run, on first use); zeros for
         a reference replay or an encoder replayed as measured."""
-        if self._enc[0] is None:
-            self._enc[0] = self._encoder_bootstrap()
-        return self._enc[0]
+        e = self._enc[0]
+        if e is None:
+            e = self._enc[0] = self._encoder_bootstrap()
+        return e
 
     @property
     def encoder_width(self) -> np.ndarray:
