@@ -415,18 +415,23 @@ def test_encoder_floor_of_a_noisy_encoder(tmp_path):
     assert at_floor >= 2
 
 
+def _quiet_mujoco_nominal(n, seed, i, bits, tmp_path):
+    """Run ``i`` of a MuJoCo nominal family (``n`` runs, ``seed``): ``bits``-bit encoders, quiet sensors."""
+    pytest.importorskip("mujoco")
+    sp = F.family_specs("nominal", "mujoco", n, seed)[i]
+    assert sp.encoder_bits == bits and sp.noise_scale < 0.5
+    path, _ = F.make_run(sp, tmp_path)
+    return _read(path)
+
+
 def test_an_effect_fitted_to_a_coarse_encoders_replay_error_is_not_a_finding(tmp_path):
     """Another engine's nominal run with 12-bit encoders and quiet sensors (session 13's one
     false alarm): a payload fitted there explains half the error above the noise with a
     huge likelihood ratio, but the model is at its floor once the encoder's replay error
     is counted, and nothing is significant."""
-    pytest.importorskip("mujoco")
     from popup import diagnosis as dg
 
-    sp = F.family_specs("nominal", "mujoco", 2, 47)[1]
-    assert sp.encoder_bits == 12 and sp.noise_scale < 0.5
-    path, _ = F.make_run(sp, tmp_path)
-    run = _read(path)
+    run = _quiet_mujoco_nominal(2, 47, 1, 12, tmp_path)
     quick = popup.diagnose(run.model(), run, effects=["payload_mass"], threads=1)
     assert quick.model_at_floor and not quick.suspects[0].tested and "encoder" in quick.conclusion, quick.conclusion
     d = popup.diagnose(run.model(), run, effects=["payload_mass"], threads=1, rank_at_floor=True)
@@ -444,14 +449,10 @@ def test_a_play_narrower_than_the_encoders_readings_is_not_a_finding(tmp_path):
     still. A backlash with µrad gaps fits that (its likelihood ratio and share of the error
     would make it a finding), but a play narrower than two readings is not significant; the
     same rule passes a play three readings wide."""
-    pytest.importorskip("mujoco")
     from popup import diagnosis as dg
     from popup import effects as fx
 
-    sp = F.family_specs("nominal", "mujoco", 50, 61)[9]
-    assert sp.encoder_bits == 14 and sp.noise_scale < 0.5
-    path, _ = F.make_run(sp, tmp_path)
-    run = _read(path)
+    run = _quiet_mujoco_nominal(50, 61, 9, 14, tmp_path)
     d = popup.diagnose(run.model(), run, effects=["backlash"], threads=1)
     s = d["backlash"]
     w = d.problem.encoder_width
