@@ -40,7 +40,8 @@ at the same accuracy. An effect that still cannot be tried is listed with
 residual). An effect is *significant* when the score exceeds :data:`SCORE_THRESHOLD`, it
 explains at least :data:`MIN_EXPLAINED` of the systematic error (``1 − S²_after/S²_before``)
 and it is confirmed on the held-out samples (the likelihood ratio there is positive and the
-held-out error falls).
+held-out error falls), unless it does not act on them at all (a torque limit reached only in
+training blocks: the held-out samples can neither confirm nor refute it; its message says so).
 
 **Refinement.** A significant effect is also fitted in its richer variants
 (:data:`VARIANTS`: friction with Stribeck terms, three segments for bending, a centre-of-mass
@@ -735,6 +736,17 @@ def _unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
             f"({_fmt_list(w.tolist())} rad each): a joint moving unseen inside its reading looks the same")
 
 
+def _silent_on(mask: np.ndarray, z0: np.ndarray, z1: np.ndarray) -> bool:
+    """Whether residual ``z1`` equals ``z0`` on the samples of ``mask`` (an effect that does
+    not act there, e.g. a torque limit reached only in the training blocks): the held-out
+    samples can then neither confirm nor refute it."""
+    a, b = np.asarray(z0)[mask], np.asarray(z1)[mask]
+    if a.size == 0 or not np.array_equal(np.isnan(a), np.isnan(b)):
+        return False
+    ok = ~np.isnan(a)
+    return bool(ok.any() and np.max(np.abs(a[ok] - b[ok])) <= 1e-9)
+
+
 def _rank_key(s: Suspect) -> Tuple[int, int, float]:
     return (0 if s.significant else 1, 0 if s.tested else 1, -s.score if math.isfinite(s.score) else math.inf)
 
@@ -755,9 +767,10 @@ class _Fitted:
         self.v1, _ = prob.error(out.z, prob.validation)
         self.explained = 1.0 - (self.e1 / self.e0) ** 2 if self.e0 > 0 and math.isfinite(self.e1) else 0.0
         self.unresolved = _unresolved_play(prob, name, out.flat)
+        self.silent = _silent_on(prob.validation & prob.used, z_base, out.z)
         self.significant = bool(
-            self.score > SCORE_THRESHOLD and self.explained >= MIN_EXPLAINED and self.lr_val > 0 and self.v1 < self.v0
-            and not self.unresolved
+            self.score > SCORE_THRESHOLD and self.explained >= MIN_EXPLAINED
+            and ((self.lr_val > 0 and self.v1 < self.v0) or self.silent) and not self.unresolved
         )
 
     def suspect(self, ev: Dict[str, Any], nfev: int, message: str = "") -> Suspect:
@@ -769,7 +782,8 @@ class _Fitted:
                 ci.setdefault(p.name, [math.nan] * p.length)[i] = float(h)
         return Suspect(
             self.name, self.significant, float(self.score), est.params_dict(self.name, self.out.flat), ci, self.e0, self.e1, self.per1, ev,
-            n_eff=self.neff, n_rollouts=nfev, message="; ".join(m for m in (self.unresolved, message) if m), tested=True, explained=self.explained,
+            n_eff=self.neff, n_rollouts=nfev, tested=True, explained=self.explained,
+            message="; ".join(m for m in (self.unresolved, "not checked on the held-out samples: it does not act there" if self.silent else "", message) if m),
             validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant,
             identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free if p.effect == self.name}),
         )
