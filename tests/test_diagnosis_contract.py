@@ -232,3 +232,22 @@ def test_isolated_spikes_are_named_where_the_error_is_left(nominal, friction_run
     assert js["channels"]["tau2"]["spikes"] == 3 and js["channels"]["tau2"]["spike_times"] == sp["tau2"]["times"], js["channels"]["tau2"]
     assert js["channels"]["tau2"]["spike_share"] > 0.9 and "isolated spikes" in js["conclusion"]
     json.dumps(js, allow_nan=False)
+
+
+def test_held_out_samples_an_effect_does_not_act_on_neither_confirm_nor_refute_it():
+    """A torque limit reached only in training blocks leaves the held-out residual exactly as
+    it was: that is 'silent', not a refutation; any change there, or a failed run (NaN), is not."""
+    from popup.diagnosis import _silent_on
+
+    rng = np.random.default_rng(3)
+    z0 = rng.standard_normal((200, 4))
+    z0[5, 1] = np.nan  # a dropout in the measurement
+    mask = np.zeros(200, dtype=bool)
+    mask[60:120] = True
+    z1 = z0.copy()
+    z1[~mask] += 0.5  # acts on the training samples only
+    assert _silent_on(mask, z0, z1)
+    z1[100, 2] += 1e-6  # acts on one held-out sample
+    assert not _silent_on(mask, z0, z1)
+    assert not _silent_on(mask, z0, np.full_like(z0, np.nan))  # a failed run is not silent
+    assert not _silent_on(np.zeros(200, dtype=bool), z0, z0)  # no held-out samples: nothing to say
