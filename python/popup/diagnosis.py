@@ -95,6 +95,7 @@ from .compare import Comparison, compare
 from .exceptions import InputError, StepTooLargeError
 from .io import MeasuredRun
 from .problem import ERROR_DEFINITION, SPIKE_SIGMA, ReplayProblem
+from .unseen import fit_unseen_motion
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
@@ -121,8 +122,9 @@ __all__ = [
     "PLAY_READINGS",
 ]
 
-SCORE_THRESHOLD = 10.0
-"""BIC improvement (with the effective sample count) above which an effect is significant."""
+SCORE_THRESHOLD = est.SCORE_THRESHOLD
+"""BIC improvement (with the effective sample count) above which an effect is significant
+(:data:`popup.estimate.SCORE_THRESHOLD`)."""
 MIN_EXPLAINED = 0.4
 """Smallest share of the systematic error (``1 − S²_after/S²_before``) a significant effect
 explains. On data no model reproduces exactly the likelihood ratio overstates significance
@@ -513,11 +515,15 @@ class HistoryStep:
     ci95: Dict[str, Dict[str, List[float]]] = field(default_factory=dict)
     removed: str = ""
     """The effect this step removed (backward step), "" when it added one."""
+    unseen_compliance: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    """Per motor joint, the compliance [rad/(N·m)] of the motion inside an encoder reading
+    that its replay includes (:mod:`popup.unseen`; zeros: none)."""
 
     def to_dict(self) -> Dict[str, Any]:
         return {
             "effects": list(self.effects),
             "removed": self.removed,
+            "unseen_compliance": [_num(x) for x in self.unseen_compliance],
             "error": _num(self.error),
             "validation_error": _num(self.validation_error),
             "params": {e: {k: [_num(x) for x in v] for k, v in p.items()} for e, p in self.params.items()},
@@ -1004,7 +1010,7 @@ def diagnose(
         fx.normalize(n, {})
     given = problem is not None
     if problem is None:
-        problem = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads)
+        problem = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads))
     elif problem.model is not model:
         raise InputError("diagnose: problem= must be a ReplayProblem of this model (ReplayProblem.with_model)")
     prob = problem
@@ -1149,9 +1155,9 @@ def improve(
         fx.normalize(n, {})  # bad input is refused before any work
     if int(max_rounds) < 0:
         raise InputError(f"input max_rounds: {max_rounds} must be ≥ 0")
-    prob = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads)
+    prob = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads))
     e0, per0 = prob.error()
-    steps = [HistoryStep([], {}, e0, per0, model, validation_error=prob.error(mask=prob.validation)[0])]
+    steps = [HistoryStep([], {}, e0, per0, model, validation_error=prob.error(mask=prob.validation)[0], unseen_compliance=prob.compliance.tolist())]
     diags: List[Diagnosis] = []
     added: List[str] = []
     fitted_params: Dict[str, List[str]] = {}
@@ -1176,19 +1182,22 @@ def improve(
             if progress is not None:
                 progress({"round": rnd + 1, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
             current, cprob, ci = _refit_stable(cprob, added, fitted_params, max_iter)
+            cprob = fit_unseen_motion(cprob)  # the torques changed with the model
             err, per = cprob.error()
             steps.append(HistoryStep(list(added), {e: current.effects.get(e, {}) for e in added}, err, per, current,
-                                     validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci))
+                                     validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, unseen_compliance=cprob.compliance.tolist()))
             # backward step: an effect added earlier that the refitted model no longer needs
             # (it stood in for the one just added) is removed
             for e in list(added[:-1]):
                 if not _still_needed(cprob, e, fitted_params[e]):
                     added.remove(e)
                     fitted_params.pop(e)
-                    current, cprob, ci = _refit_stable(prob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
+                    current, cprob, ci = _refit_stable(cprob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
+                    cprob = fit_unseen_motion(cprob)
                     err, per = cprob.error()
                     steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
-                                             validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e))
+                                             validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e,
+                                             unseen_compliance=cprob.compliance.tolist()))
             remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
             if not remaining or _at_floor(steps[-1], prob):
                 break
@@ -1229,14 +1238,22 @@ def _encoder_text(ef: Mapping[str, float]) -> str:
 
 
 def _still_needed(prob: ReplayProblem, effect: str, params: Sequence[str]) -> bool:
-    """Whether the model of ``prob`` needs ``effect``: the likelihood ratio of the model
-    with it against the model without it (its parameters neutral, nothing refitted, so
-    the test keeps an effect when in doubt) passes the significance threshold."""
+    """Whether the model of ``prob`` needs ``effect``, by the rules that would have added it:
+    a play narrower than the encoder resolves (:func:`_unresolved_play`) is not needed; nor
+    is an effect without which the model is at its floor (:func:`_model_at_floor`, with its
+    own unseen motion); otherwise the likelihood ratio of the model with it against the
+    model without it (its parameters neutral, nothing refitted, so the test keeps an
+    effect when in doubt) must pass the significance threshold."""
+    if _unresolved_play(prob, effect, prob.model.effects_flat):
+        return False
     try:
-        without = prob.with_model(prob.model.without_effect(effect))
+        without = fit_unseen_motion(prob.with_model(prob.model.without_effect(effect)))
         z_wo = without.residuals(without.nominal_simulation())
+        e_wo, per_wo = without.error(z_wo)
     except Exception:  # noqa: BLE001 - if it cannot be removed, keep it
         return True
+    if _model_at_floor(without, e_wo, per_wo):
+        return False
     z = prob.residuals(prob.nominal_simulation())
     lr, neff = est.log_ratio(prob, z_wo, z, prob.train)
     k = len(est.free_params(effect, list(params) or None))
@@ -1322,6 +1339,9 @@ def _conclude(h: History, max_rounds: int) -> str:
             left = f"stopped after max_rounds = {max_rounds}; {d_last.best.effect} is still significant ({where})"
         else:
             left = f"a systematic error of {last.error:.3g} noise units is left that is not explained by the library ({where})"
+    if any(c > 0 for c in last.unseen_compliance):
+        left += (" (the replay includes the motor joints' motion inside one encoder reading, a servo compliance of "
+                 + "/".join(f"{c:.2g}" for c in last.unseen_compliance) + " rad/(N·m) per joint: popup.unseen)")
     parts.append(left)
     untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses if not d.model_at_floor for s in d.untested})
     if untested:

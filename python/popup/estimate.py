@@ -61,6 +61,7 @@ __all__ = [
     "best_start",
     "log_ratio",
     "n_eff",
+    "SCORE_THRESHOLD",
     "uncertainty",
 ]
 
@@ -320,6 +321,11 @@ def n_eff(n: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """Effective sample counts ``n (1 − ρ)/(1 + ρ)`` (ρ clipped to [0, 0.999])."""
     r = np.clip(np.nan_to_num(rho, nan=0.0), 0.0, 0.999)
     return n * (1.0 - r) / (1.0 + r)
+
+
+SCORE_THRESHOLD = 10.0
+"""BIC improvement (with the effective sample count) above which an effect is significant:
+``LR − k ln n_eff > SCORE_THRESHOLD`` for k fitted parameters."""
 
 
 def log_ratio(prob: ReplayProblem, z_before: np.ndarray, z_after: np.ndarray, mask: np.ndarray) -> Tuple[float, float]:

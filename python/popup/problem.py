@@ -310,6 +310,9 @@ class ReplayProblem:
     _count: List[int]
     _nominal: Optional[Tuple[np.ndarray, Any]]
     _enc: List[Optional[np.ndarray]]
+    q_base: np.ndarray
+    q_corr: np.ndarray
+    compliance: np.ndarray
 
     def __init__(
         self,
@@ -346,6 +349,7 @@ class ReplayProblem:
             self.task, self.q0, self.t0, self.duration = p.task, p.q0, p.t0, p.duration
             self.sigma = p.sigma
             self._enc = p._enc  # the encoder's error is the run's: shared with every derived problem
+            self.q_base, self.q_corr, self.compliance = p.q_base, p.q_corr, p.compliance
             self._nominal = None
             return
         notes: List[str] = []
@@ -361,6 +365,7 @@ class ReplayProblem:
         self.iq = None
         self.iv = None
         self.smoothing = None
+        self.compliance = np.zeros(3)
         if self.closed:
             self.t_enc, self.q_enc = run.reference()
             self.q_enc_raw = self.q_enc
@@ -377,6 +382,8 @@ class ReplayProblem:
                     self.q_enc = self.smoothing.q
                     notes.append(f"encoder: {self.smoothing.method}")
             self.iq, self.iv = initial_state(model, run, self.q_enc[0], notes)
+        self.q_base = self.q_enc
+        self.q_corr = np.zeros_like(np.asarray(self.q_enc, dtype=np.float64))
         self.sample_rate = output_rate(model.dt, self.t_enc, self.time, sample_rate, notes)
         self.used = np.ones(len(self.time), dtype=bool)
         self.train, self.validation = _split(self.time)
@@ -442,8 +449,25 @@ class ReplayProblem:
         k_enc = self.t_enc <= t_end + 1e-9
         if k_enc.sum() >= 5:
             p.t_enc, p.q_enc, p.q_enc_raw = self.t_enc[k_enc], self.q_enc[k_enc], self.q_enc_raw[k_enc]
+            p.q_base, p.q_corr = self.q_base[k_enc], self.q_corr[k_enc]
         if self.closed:
             p.duration = min(self.duration, float(t_end - self.t0))
+        return p
+
+    def with_unseen_motion(self, compliance: Any, q_corr: np.ndarray) -> "ReplayProblem":
+        """The same problem with the replayed angles moved by ``q_corr`` (n_enc, 3) [rad]
+        from the smoothed encoder, the motion inside a reading that
+        :func:`popup.unseen.fit_unseen_motion` gives for joint compliances ``compliance``
+        (3,) [rad/(N·m)]; zeros give the smoothed encoder again, bit for bit."""
+        p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
+        q_corr = np.asarray(q_corr, dtype=np.float64)
+        if q_corr.shape != np.shape(self.q_enc):
+            raise InputError(f"with_unseen_motion: q_corr has shape {q_corr.shape}, the encoder {np.shape(self.q_enc)}")
+        p.q_corr = q_corr
+        p.q_enc = self.q_base + q_corr if np.any(q_corr != 0) else self.q_base
+        p.compliance = np.asarray(compliance, dtype=np.float64).copy()
+        if np.any(q_corr != 0) or np.any(self.q_corr != 0):
+            p._enc = [None]  # the encoder floor re-measures the replayed angles: these ones
         return p
 
     def with_initial_state(self, q: Any, v: Any) -> "ReplayProblem":
@@ -525,6 +549,8 @@ class ReplayProblem:
 
         par = sm.params
         rng = np.random.default_rng(_ENCODER_SEED)
+        # the draws re-measure the replayed angles (with any unseen motion, popup.unseen), which
+        # the smoothing of each draw loses again and the replay adds back
         t, g = self.t_enc, self.q_enc
         base = self.nominal_simulation()
         acc, n = np.zeros(C), 0
@@ -541,7 +567,7 @@ class ReplayProblem:
                 if step is not None:
                     y[:, j] = np.round((y[:, j] + rng.uniform(-0.5, 0.5) * step) / step) * step
             try:
-                d = self._replay_channels(smooth_encoder(t, y).q) - base
+                d = self._replay_channels(smooth_encoder(t, y).q + self.q_corr) - base
             except Exception:  # noqa: BLE001 - a draw the engine refuses is left out
                 continue
             d = d[self.used]
