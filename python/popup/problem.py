@@ -28,6 +28,10 @@ What it holds (set up once, reused by every fit):
   the quantisation; smoothed again; replayed). A 12-bit encoder on a quiet IMU leaves
   the replay with the true model above the IMU's noise: that is a limit of the data, not
   a missing effect (``floor = sqrt(σ_c² + σ_enc,c²)``, :meth:`ReplayProblem.floor_multiples`).
+* **Unseen motion** (encoder replay, :mod:`popup.unseen`, used by the diagnosis): a servo's
+  motion inside an encoder reading, fitted as a joint compliance bounded to a reading
+  (:meth:`ReplayProblem.with_unseen_motion`, :attr:`ReplayProblem.compliance`; zeros and
+  the smoothed encoder as is unless it is significant).
 * **Training and validation samples**: the run cut in :data:`N_BLOCKS` equal time
   blocks; blocks :data:`VALIDATION_BLOCKS` are held out (30 %, spread over the run so
   that they see every kind of excitation). Fits use the training samples; an effect is
