@@ -445,22 +445,23 @@ def test_an_effect_fitted_to_a_coarse_encoders_replay_error_is_not_a_finding(tmp
 
 def test_a_play_narrower_than_the_encoders_readings_is_not_a_finding(tmp_path):
     """A MuJoCo nominal run with 14-bit encoders and quiet sensors (noise × 0.45): its servos
-    let the held motors yield to the links by a fraction of a reading, which the replay holds
-    still. A backlash with µrad gaps fits that (its likelihood ratio and share of the error
-    would make it a finding), but a play narrower than two readings is not significant; the
-    same rule passes a play three readings wide."""
+    let the held motors yield to the links by a fraction of a reading. Before popup.unseen a
+    backlash with µrad gaps fitted that (a likelihood ratio above 10 × the threshold) and the
+    play rule refused it. With the servo's motion in the replay the run is at its floor and
+    the backlash, fitted anyway, explains nothing (score below the threshold) and its gaps
+    are still refused; the rule passes a play three readings wide."""
     from popup import diagnosis as dg
     from popup import effects as fx
 
     run = _quiet_mujoco_nominal(50, 61, 9, 14, tmp_path)
-    d = popup.diagnose(run.model(), run, effects=["backlash"], threads=1)
+    quick = popup.diagnose(run.model(), run, effects=["backlash"], threads=1)
+    assert quick.model_at_floor and quick.problem.compliance.any() and not quick["backlash"].tested
+    d = popup.diagnose(run.model(), run, effects=["backlash"], threads=1, rank_at_floor=True)
     s = d["backlash"]
     w = d.problem.encoder_width
     assert np.allclose(w, F.encoder_resolution(14), rtol=0.02), w
-    # the held law (a play operator) fits it: a large score, refused for its µrad gaps
-    m = re.search(r"variant held link side \(play operator\) not preferred \(score ([0-9.]+).*?narrower than 2 encoder readings", s.message)
-    assert m and float(m.group(1)) > 10 * dg.SCORE_THRESHOLD, s.message
-    assert not s.significant and d.best is None, s.message
+    assert not s.significant and d.best is None and s.score < dg.SCORE_THRESHOLD, (s.score, s.message)
+    assert "narrower than 2 encoder readings" in s.message, s.message
     flat = run.model().effects_flat.copy()
     sl = fx.EFFECTS["backlash"].params["gap"].slice
     flat[sl] = 3.0 * w
@@ -480,42 +481,45 @@ def _coarse_trapezoids(engine, n, seed, tmp_path):
 
 
 def test_a_servos_motion_inside_a_reading_is_part_of_the_replay(tmp_path):
-    """MuJoCo's servos (1.8e6 N·m/rad) yield to the links' ringing by less than a 12-bit
-    reading; the replay that holds those joints at their readings drifts out of phase with
-    the links. popup.unseen fits that motion as a joint compliance bounded to a reading: on
-    a family of such runs it is found on some, of the servo's order (0.1-10 × 1/k), always
-    inside its bound, the error falls and those runs are at their floor (nothing is tried,
-    so no effect can be added for it). popup's own engine has rigid joints: nothing is
-    fitted there and the replay is the smoothed encoder's, bit for bit."""
+    """MuJoCo's servos (k = 1.8e6 N·m/rad) yield to the links' ringing by less than a 12-bit
+    reading while they hold a joint; the replay that holds those joints at their readings
+    rings the links wrongly (the readings flip when that motion crosses a level) and sits
+    at 1.3-4 × the noise. popup.unseen replaces the holds' readings by their mean plus a
+    compliance times the replayed torque: on a family of such runs the compliance comes out
+    at the servo's own (median within 30 %, every joint within 0.1-5 ×), the motion stays
+    inside a reading, the error falls and the runs are at their floor, where the diagnosis
+    tries nothing. popup's own engine has rigid joints: nothing is fitted there and the
+    replay is the smoothed encoder's, bit for bit."""
     from popup import diagnosis as dg
     from popup.problem import ReplayProblem
-    from popup.unseen import replayed_torque, fit_unseen_motion, unseen_bound
+    from popup.unseen import fit_unseen_motion, holds
 
     k_servo = 0.8 * F.SERVO_W**2  # the generator's servo stiffness on its 0.8 kg·m² rotor
-    to_floor = 0
-    for run in _coarse_trapezoids("mujoco", 4, 11, tmp_path):
+    ck, to_floor = [], 0
+    runs = _coarse_trapezoids("mujoco", 4, 11, tmp_path)
+    for i, run in enumerate(runs):
         p = ReplayProblem(run.model(), run, threads=1)
         e0, per0 = p.error()
+        assert not dg._model_at_floor(p, e0, per0), per0  # above its floor as the readings are
         q = fit_unseen_motion(p)
         c = q.compliance
-        if not c.any():
-            assert q is p
-            continue
-        bound = unseen_bound(p, replayed_torque(p))
-        assert np.all(c >= 0) and np.all(c <= bound * (1 + 1e-9)), (c, bound)
-        big = c[c > 0.05 * c.max()]
-        assert np.all((big * k_servo > 0.1) & (big * k_servo < 10.0)), c * k_servo
-        # the replay is the smoothed encoder plus exactly that motion, and it fits better
-        assert np.array_equal(q.q_enc, p.q_enc + q.q_corr) and np.abs(q.q_corr).max() > 0
+        assert c.any() and np.all(c >= 0), c
+        ck += [float(v) * k_servo for v in c if v > 0]
+        assert all(hs for hs in holds(p)), holds(p)
+        # the replayed angle stays within about a reading of the smoothed one (mean of a
+        # hold: half a reading; the motion: one), and is the smoothed one outside the holds
+        w = p.encoder_width
+        assert np.all(np.abs(q.q_corr) <= 2.0 * w[None, :]), np.abs(q.q_corr).max(axis=0) / w
+        assert np.array_equal(q.q_enc, p.q_enc + q.q_corr)
         e1, per1 = q.error()
-        assert e1 < e0, (e0, e1)
-        if not (e1 < 0.8 * e0 and dg._model_at_floor(q, e1, per1) and not dg._model_at_floor(p, e0, per0)):
-            continue
-        to_floor += 1
-        d = popup.diagnose(run.model(), run, effects=["payload_mass", "wrinkling"], threads=1)
-        assert d.problem.compliance.tolist() == c.tolist() and d.model_at_floor and d.best is None, d.conclusion
-        assert not any(s.tested for s in d.suspects)
-    assert to_floor >= 2, to_floor
+        assert e1 < 0.7 * e0, (e0, e1)
+        to_floor += dg._model_at_floor(q, e1, per1)
+        if i == 0:
+            d = popup.diagnose(run.model(), run, effects=["payload_mass", "wrinkling"], threads=1)
+            assert d.problem.compliance.tolist() == c.tolist() and d.model_at_floor and d.best is None, d.conclusion
+            assert not any(s.tested for s in d.suspects)
+    assert to_floor >= 3, to_floor
+    assert 0.7 < float(np.median(ck)) < 1.4 and all(0.1 < v < 5.0 for v in ck), ck
     for run in _coarse_trapezoids("popup", 2, 11, tmp_path):
         p = ReplayProblem(run.model(), run, threads=1)
         q = fit_unseen_motion(p)

@@ -96,7 +96,7 @@ import numpy as np
 
 from .exceptions import InputError
 
-__all__ = ["SmoothedEncoder", "smooth_encoder", "detect_resolution", "estimate_noise"]
+__all__ = ["SmoothedEncoder", "smooth_encoder", "smooth_at", "detect_resolution", "estimate_noise"]
 
 _MEDIAN_CHI2_1 = 0.454936423119572  # median of a chi-squared variable with 1 degree of freedom
 _STEP_TOL = 0.02  # a difference is a whole number of steps within 2 % of a step
@@ -329,6 +329,17 @@ def _discrepancy(sp: _Reinsch, y: np.ndarray, var: float, lam_lo: float, lam_hi:
 
 
 # ----------------------------------------------------------------- public
+def smooth_at(t: Any, y: Any, lam: float) -> np.ndarray:
+    """The cubic smoothing spline of samples ``y`` (N,) on stamps ``t`` at a given λ (step 4
+    of the module docs; e.g. ``params["lam"][j]`` of a :class:`SmoothedEncoder`), at the stamps."""
+    tt = np.asarray(t, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    if tt.ndim != 1 or yy.shape != tt.shape or tt.shape[0] < 3:
+        raise InputError(f"smooth_at: t and y must be (N,) with N >= 3, got {tt.shape} and {yy.shape}")
+    sp = _Reinsch(tt)
+    return yy - sp.residual(sp.qt(yy), float(lam))
+
+
 def smooth_encoder(t: Any, q: Any, *, resolution: Optional[float] = None, noise: Any = None) -> SmoothedEncoder:
     """Smooth measured encoder angles for an encoder replay (module docs: the method).
 
