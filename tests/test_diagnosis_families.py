@@ -524,6 +524,11 @@ def test_a_servos_motion_inside_a_reading_is_part_of_the_replay(tmp_path):
         p = ReplayProblem(run.model(), run, threads=1)
         q = fit_unseen_motion(p)
         assert q is p and not q.compliance.any()
+        # a zero correction gives the smoothed encoder back, bit for bit; a wrong shape is named
+        z = p.with_unseen_motion(np.zeros(3), np.zeros_like(p.q_enc))
+        assert z.q_enc is p.q_base and np.array_equal(z.nominal_simulation(), p.nominal_simulation(), equal_nan=True)
+        with pytest.raises(popup.PopupError, match="q_corr has shape"):
+            p.with_unseen_motion(np.zeros(3), np.zeros((3, 3)))
 
 
 def test_the_backward_step_applies_the_rules_that_add_an_effect(tmp_path):

@@ -17,7 +17,7 @@ from scipy.interpolate import CubicSpline, make_smoothing_spline
 
 import popup
 from popup.exceptions import InputError
-from popup.smoothing import SmoothedEncoder, detect_resolution, estimate_noise, smooth_encoder
+from popup.smoothing import SmoothedEncoder, detect_resolution, estimate_noise, smooth_at, smooth_encoder
 from popup.synth import ENCODER_RESOLUTION, NOISE
 
 R = ENCODER_RESOLUTION
@@ -215,6 +215,23 @@ def test_is_the_scipy_smoothing_spline_and_the_replay_keeps_it():
         assert np.max(np.abs(nat(mid, 2) - ref(mid, 2))) < 1e-6 * max(1.0, np.max(np.abs(ref(mid, 2))))
         r = q[:, j] - sm.q[:, j]
         assert np.sqrt(np.mean(r * r)) == pytest.approx(sm.sigma[j], rel=0.02)  # the discrepancy principle
+
+
+def test_smooth_at_is_the_smoothing_spline_at_a_given_lambda():
+    """smooth_at(t, y, λ) is scipy's make_smoothing_spline(lam=λ) at the stamps, on any
+    stamps, and reproduces smooth_encoder with its own λ; bad shapes are named."""
+    t = stamps(200.0, 2.0, 0.15, 4)
+    x, _ = trajectory("chirp-5", t, 4)
+    q = measure(x, R, 0.0, 4)
+    sm = smooth_encoder(t, q)
+    for j in range(3):
+        lam = sm.params["lam"][j]
+        assert np.array_equal(smooth_at(t, q[:, j], lam), sm.q[:, j])
+        for f in (0.1, 10.0):
+            ref = make_smoothing_spline(t, q[:, j], lam=f * lam)(t)
+            assert np.max(np.abs(smooth_at(t, q[:, j], f * lam) - ref)) < 1e-12
+    with pytest.raises(InputError, match="smooth_at"):
+        smooth_at(t, q, 1.0)
 
 
 def test_given_resolution_and_noise():
