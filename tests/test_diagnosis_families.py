@@ -518,6 +518,10 @@ def test_a_servos_motion_inside_a_reading_is_part_of_the_replay(tmp_path):
             d = popup.diagnose(run.model(), run, effects=["payload_mass", "wrinkling"], threads=1)
             assert d.problem.compliance.tolist() == c.tolist() and d.model_at_floor and d.best is None, d.conclusion
             assert not any(s.tested for s in d.suspects)
+            assert d.to_dict()["unseen_compliance"] == c.tolist()
+            h = popup.improve(run.model(), run, effects=["payload_mass"], threads=1)
+            assert h.steps[-1].effects == [] and h.to_dict()["history"][0]["unseen_compliance"] == c.tolist()
+            assert "servo compliance" in h.conclusion, h.conclusion
     assert to_floor >= 3, to_floor
     assert 0.7 < float(np.median(ck)) < 1.4 and all(0.1 < v < 5.0 for v in ck), ck
     for run in _coarse_trapezoids("popup", 2, 11, tmp_path):

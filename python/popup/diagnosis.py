@@ -462,6 +462,7 @@ class Diagnosis:
             "encoder_floor": {k: _num(v) for k, v in self.encoder_floor.items()},
             "floor_error": _num(self.floor_error),
             "model_at_floor": bool(self.model_at_floor),
+            "unseen_compliance": [_num(x) for x in (self.problem.compliance if self.problem is not None else np.zeros(3))],
             "residual_white": bool(self.residual_white),
             "suspects": [s.to_dict() for s in self.suspects],
             "conclusion": self.conclusion,
