@@ -102,11 +102,20 @@ def fit_unseen_motion(prob: ReplayProblem) -> ReplayProblem:
     if prob.closed or prob.smoothing is None:
         return prob
     plain = prob.with_unseen_motion(np.zeros(3), np.zeros_like(prob.q_corr)) if np.any(prob.q_corr != 0) else prob
+    try:
+        return _fit(plain)
+    except Exception as e:  # noqa: BLE001 - the replay as smoothed is still a valid replay
+        plain.notes.append(f"unseen joint motion (popup.unseen) not fitted: {type(e).__name__}: {e}")
+        return plain
+
+
+def _fit(plain: ReplayProblem) -> ReplayProblem:
     hs = holds(plain)
     joints = [j for j in range(3) if hs[j]]
     if not joints:
         return plain
     t, raw = plain.t_enc, np.asarray(plain.q_enc_raw, dtype=float)
+    assert plain.smoothing is not None
     lams = plain.smoothing.params.get("lam", [None] * 3)
     tau = replayed_torque(plain)
     w = np.asarray(plain.encoder_width, dtype=float)
@@ -135,10 +144,7 @@ def fit_unseen_motion(prob: ReplayProblem) -> ReplayProblem:
     for j in joints:
         q = flat.copy()
         q[:, j] -= cmax[j] * delta[:, j]
-        try:
-            y = base._replay_channels(q)
-        except Exception:  # noqa: BLE001 - a joint the engine refuses to move is left alone
-            return plain
+        y = base._replay_channels(q)
         cols.append((y - y0) / sig / cmax[j])
     ok = base.train[:, None] & np.isfinite(zf) & np.all([np.isfinite(c) for c in cols], axis=0)
     # each channel weighed by its whole residual variance (the fit's objective, estimate docs)
