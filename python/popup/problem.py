@@ -470,8 +470,6 @@ class ReplayProblem:
         p.q_corr = q_corr
         p.q_enc = self.q_base + q_corr if np.any(q_corr != 0) else self.q_base
         p.compliance = np.asarray(compliance, dtype=np.float64).copy()
-        if np.any(q_corr != 0) or np.any(self.q_corr != 0):
-            p._enc = [None]  # the encoder floor re-measures the replayed angles: these ones
         return p
 
     def with_initial_state(self, q: Any, v: Any) -> "ReplayProblem":
@@ -553,10 +551,10 @@ class ReplayProblem:
 
         par = sm.params
         rng = np.random.default_rng(_ENCODER_SEED)
-        # the draws re-measure the replayed angles (with any unseen motion, popup.unseen), which
-        # the smoothing of each draw loses again and the replay adds back
-        t, g = self.t_enc, self.q_enc
-        base = self.nominal_simulation()
+        # the error of the readings as smoothed, around the smoothed angles: the same for any
+        # unseen motion (popup.unseen) added to them, so shared by every derived problem
+        t, g = self.t_enc, self.q_base
+        base = self._replay_channels(g) if np.any(self.q_corr != 0) else self.nominal_simulation()
         acc, n = np.zeros(C), 0
         for _ in range(ENCODER_DRAWS):
             y = g.copy()
@@ -571,7 +569,7 @@ class ReplayProblem:
                 if step is not None:
                     y[:, j] = np.round((y[:, j] + rng.uniform(-0.5, 0.5) * step) / step) * step
             try:
-                d = self._replay_channels(smooth_encoder(t, y).q + self.q_corr) - base
+                d = self._replay_channels(smooth_encoder(t, y).q) - base
             except Exception:  # noqa: BLE001 - a draw the engine refuses is left out
                 continue
             d = d[self.used]
