@@ -41,7 +41,7 @@ and again after each effect the loop adds (the torque changes with the model). T
 comparison (:func:`popup.compare`) and :func:`popup.fit_params` replay the encoder as
 smoothed. On MuJoCo runs with 12-bit encoders and servos of 1.8e6 N·m/rad (compliance
 5.6e-7 rad/(N·m)) the fitted compliances are 0.13-2.9 × that, median 1.01 ×, and the replays
-go from 1.3-4.2 × their noise to 1.0-1.5 × (their floors); on popup's engine (rigid joints)
+go from 1.3-4.2 × their noise to 1.0-1.5 × (eight of nine at their floors); on popup's engine (rigid joints)
 nothing is fitted (docs/effects.md, benchmarks/README.md).
 """
 
