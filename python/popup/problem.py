@@ -554,7 +554,7 @@ class ReplayProblem:
         # the error of the readings as smoothed, around the smoothed angles: the same for any
         # unseen motion (popup.unseen) added to them, so shared by every derived problem
         t, g = self.t_enc, self.q_base
-        base = self._replay_channels(g) if np.any(self.q_corr != 0) else self.nominal_simulation()
+        base = self.replay_angles(g) if np.any(self.q_corr != 0) else self.nominal_simulation()
         acc, n = np.zeros(C), 0
         for _ in range(ENCODER_DRAWS):
             y = g.copy()
@@ -569,7 +569,7 @@ class ReplayProblem:
                 if step is not None:
                     y[:, j] = np.round((y[:, j] + rng.uniform(-0.5, 0.5) * step) / step) * step
             try:
-                d = self._replay_channels(smooth_encoder(t, y).q) - base
+                d = self.replay_angles(smooth_encoder(t, y).q) - base
             except Exception:  # noqa: BLE001 - a draw the engine refuses is left out
                 continue
             d = d[self.used]
@@ -660,8 +660,9 @@ class ReplayProblem:
             out[:, j] = y if same else np.where(inside, np.interp(self.time, t_sim, y), np.nan)
         return out
 
-    def _replay_channels(self, q_enc: np.ndarray) -> np.ndarray:
-        """(n, C) the model replaying encoder angles ``q_enc`` (on :attr:`t_enc`)."""
+    def replay_angles(self, q_enc: np.ndarray) -> np.ndarray:
+        """(n, C) the model replaying encoder angles ``q_enc`` [rad] (n_enc, 3) on :attr:`t_enc`,
+        on the measured stamps (the encoder bootstrap, :mod:`popup.unseen`)."""
         res = self.model.replay(self.t_enc, q_enc, sample_rate=self.sample_rate, initial_q=self.iq, initial_v=self.iv)
         self.nfev += 1
         return self._on_stamps(res)

@@ -144,7 +144,7 @@ def _fit(plain: ReplayProblem) -> ReplayProblem:
     for j in joints:
         q = flat.copy()
         q[:, j] -= cmax[j] * delta[:, j]
-        y = base._replay_channels(q)
+        y = base.replay_angles(q)
         cols.append((y - y0) / sig / cmax[j])
     ok = base.train[:, None] & np.isfinite(zf) & np.all([np.isfinite(c) for c in cols], axis=0)
     # each channel weighed by its whole residual variance (the fit's objective, estimate docs)
@@ -166,7 +166,7 @@ def _fit(plain: ReplayProblem) -> ReplayProblem:
     lr, neff = est.log_ratio(plain, z0, z1, plain.train)
     if not (lr - k * math.log(neff) > est.SCORE_THRESHOLD and plain.error(z1, plain.train)[0] < plain.error(z0, plain.train)[0]):
         return plain
-    held = sum(t[b - 1] - t[a] for j in joints for a, b in hs[j])
+    held = sum(t[e - 1] - t[s] for j in joints for s, e in hs[j])
     cand.notes.append("unseen joint motion (popup.unseen): compliance " + ", ".join(f"{v:.3g}" for v in c)
                       + f" rad/(N·m) per motor joint, in {held:.3g} s of holds")
     return cand
