@@ -8,7 +8,8 @@ runs), and counts, separately for each engine:
     (``history[1]["effects"][0]``) AND the error falls by at least half
     (``min(history[*]["error"]) <= 0.5 * nominal_error``);
 (b) nominal runs: a false alarm is any effect added (``len(history) > 1``);
-(c) pairs: both hidden effects are among the effects added within the first two rounds;
+(c) pairs: both hidden effects are in the model at the end of round 2 (each round adds one
+    effect, then may remove or swap one added earlier: ``history[*]["round"]``);
 (d) disturbance (outside the library): nothing added and the ``conclusion`` says the
     error is not explained by the library.
 
@@ -167,7 +168,13 @@ def classify(truth: Dict[str, Any], res: Dict[str, Any]) -> Dict[str, Any]:
         out["false_alarm"] = len(hist) > 1
         out["ok"] = not out["false_alarm"]
     elif kind == "pair":
-        two = set(str(e) for e in (hist[min(2, len(hist) - 1)].get("effects", []) or [])) if hist else set()
+        # the model at the end of round 2 (its addition, backward and swap steps); without
+        # the "round" key (older results) the third step
+        if hist and all("round" in h for h in hist):
+            last2 = [h for h in hist if int(h["round"]) <= 2][-1]
+        else:
+            last2 = hist[min(2, len(hist) - 1)] if hist else {}
+        two = set(str(e) for e in (last2.get("effects", []) or []))
         out["both_in_two"] = set(hidden) <= two
         out["ok"] = out["both_in_two"]
     elif kind == "disturbance":

@@ -515,7 +515,15 @@ class HistoryStep:
     validation_error: float = math.nan
     ci95: Dict[str, Dict[str, List[float]]] = field(default_factory=dict)
     removed: str = ""
-    """The effect this step removed (backward step), "" when it added one."""
+    """The effect this step removed (backward or swap step), "" when it only added one."""
+    swapped_in: str = ""
+    """The effect a swap step put in place of ``removed`` ("" otherwise)."""
+    law_reset: str = ""
+    """The effect this step set back to its base law (a richer variant's extra parameters
+    neutral again: they had stood in for the effect this step added), "" otherwise."""
+    round: int = 0
+    """The round of the loop this step belongs to (0: the model as given; round k's
+    addition and its backward and swap steps all carry k)."""
     unseen_compliance: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     """Per motor joint, the compliance [rad/(N·m)] of the motion inside an encoder reading
     that its replay includes (:mod:`popup.unseen`; zeros: none)."""
@@ -523,7 +531,10 @@ class HistoryStep:
     def to_dict(self) -> Dict[str, Any]:
         return {
             "effects": list(self.effects),
+            "round": int(self.round),
             "removed": self.removed,
+            "swapped_in": self.swapped_in,
+            "law_reset": self.law_reset,
             "unseen_compliance": [_num(x) for x in self.unseen_compliance],
             "error": _num(self.error),
             "validation_error": _num(self.validation_error),
@@ -888,10 +899,13 @@ def _coordinate_seeds(prob: ReplayProblem, name: str, free: List[Tuple[fx.Effect
     return x
 
 
-def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int, also: Optional[List[Tuple[fx.EffectParam, int]]] = None) -> Suspect:
+def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int, also: Optional[List[Tuple[fx.EffectParam, int]]] = None,
+                prior: Optional[Mapping[str, Sequence[float]]] = None) -> Suspect:
+    """Fit ``name`` from its seeds (and ``prior``, its fit of an earlier round, as one more
+    start), then its variants; the best as a :class:`Suspect`."""
     n0 = prob.nfev
     try:
-        fitted, note = _fit_candidate(prob, name, _STRUCTURE.get(name), None, None, None, max_iter, also=also)
+        fitted, note = _fit_candidate(prob, name, _STRUCTURE.get(name), None, None, [dict(prior)] if prior else None, max_iter, also=also)
     except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
         return Suspect(name, False, -math.inf, {}, {}, math.nan, math.nan, {}, ev, tested=False,
                        message=f"not tested: {type(e).__name__}: {e}")
@@ -992,6 +1006,7 @@ def diagnose(
     progress: Optional[Progress] = None,
     refit: Optional[Mapping[str, Sequence[str]]] = None,
     rank_at_floor: bool = False,
+    starts: Optional[Mapping[str, Mapping[str, Sequence[float]]]] = None,
 ) -> Diagnosis:
     """Rank every effect of the library (or ``effects``) by how much of the model's
     systematic error on ``run`` it explains, each fitted, validated on held-out samples,
@@ -1004,6 +1019,9 @@ def diagnose(
     added them) refitted jointly with each candidate.
     ``rank_at_floor``: for a model at its floor (module docs), fit and rank the candidates
     anyway (none is significant); by default they are not tried, each saying why.
+    ``starts``: ``{effect: {parameter: values}}``, one more start for that effect's fit (as
+    :func:`improve` passes each candidate's fit of the round before: an effect fitted well
+    alone keeps that basin once another effect is in the model).
     """
     t_start = time.perf_counter()
     names = list(fx.EFFECT_NAMES if effects is None else effects)
@@ -1040,7 +1058,7 @@ def diagnose(
         if progress is not None:
             progress({"effect": name, "done": i, "total": total})
         evs[name] = _evidence(name, cmp, prob)
-        suspects.append(_try_effect(prob, name, evs[name], max_iter, None))
+        suspects.append(_try_effect(prob, name, evs[name], max_iter, None, (starts or {}).get(name)))
     suspects.sort(key=_rank_key)
     if also:
         for i, s in enumerate(suspects[:JOINT_TOP]):
@@ -1173,20 +1191,41 @@ def improve(
     try:
         d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, rank_at_floor=rank_at_floor)
         diags.append(d)
-        while d.best is not None and rnd < max_rounds:
-            rnd += 1
-            s = d.best
-            added.append(s.effect)
-            fitted_params[s.effect] = list(s.fitted)
-            cand = s.apply(current)
-            cprob = prob.with_model(cand)
-            if progress is not None:
-                progress({"round": rnd + 1, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
-            current, cprob, ci = _refit_stable(cprob, added, fitted_params, max_iter)
-            cprob = fit_unseen_motion(cprob)  # the torques changed with the model
+        while rnd < max_rounds:
+            reset = ""
+            if d.best is not None:
+                rnd += 1
+                s = d.best
+                added.append(s.effect)
+                fitted_params[s.effect] = list(s.fitted)
+                cand = s.apply(current)
+                cprob = prob.with_model(cand)
+                if progress is not None:
+                    progress({"round": rnd + 1, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
+                current, cprob, ci = _refit_stable(cprob, added, fitted_params, max_iter)
+                cprob = fit_unseen_motion(cprob)  # the torques changed with the model
+            else:
+                # nothing significant is left, but the model is not at its floor: a richer
+                # law chosen for an earlier effect may be standing in for a missing effect
+                # (a payload's centre-of-mass offset for a torsion); each is tried back at
+                # its base law with the best candidate added
+                lw = None
+                if added and not _at_floor(steps[-1], prob):
+                    for e in list(added):
+                        lw = _try_base_law(prob, run, cprob, e, added, fitted_params, effects, diags, threads, max_iter, prog)
+                        if lw is not None:
+                            reset = e
+                            break
+                if lw is None:
+                    break
+                rnd += 1
+                c, current, cprob, ci, fitted_params, d_law = lw
+                added.append(c)
+                diags.append(d_law)
             err, per = cprob.error()
             steps.append(HistoryStep(list(added), {e: current.effects.get(e, {}) for e in added}, err, per, current,
-                                     validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, unseen_compliance=cprob.compliance.tolist()))
+                                     validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, unseen_compliance=cprob.compliance.tolist(),
+                                     round=rnd, law_reset=reset))
             # backward step: an effect added earlier that the refitted model no longer needs
             # (it stood in for the one just added) is removed
             for e in list(added[:-1]):
@@ -1198,11 +1237,28 @@ def improve(
                     err, per = cprob.error()
                     steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
                                              validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e,
-                                             unseen_compliance=cprob.compliance.tolist()))
+                                             unseen_compliance=cprob.compliance.tolist(), round=rnd))
+            # swap step: an effect added earlier may have stood in for two (the greedy first
+            # round picks one effect for the error of both); each is tried replaced by the
+            # best candidate for the model without it, and the swap is kept when the
+            # likelihood prefers it
+            for e in list(added[:-1]):
+                if e not in added or _at_floor(steps[-1], prob):
+                    continue
+                sw = _try_swap(prob, run, cprob, e, added, fitted_params, effects, diags, threads, max_iter, prog)
+                if sw is None:
+                    continue
+                c, current, cprob, ci, fitted_params = sw
+                added[added.index(e)] = c
+                err, per = cprob.error()
+                steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
+                                         validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e, swapped_in=c,
+                                         unseen_compliance=cprob.compliance.tolist(), round=rnd))
             remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
             if not remaining or _at_floor(steps[-1], prob):
                 break
-            d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, refit=fitted_params)
+            d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, refit=fitted_params,
+                         starts=_prior_fits(diags))
             diags.append(d)
     except KeyboardInterrupt:
         raise
@@ -1212,6 +1268,114 @@ def improve(
     h.conclusion = _conclude(h, max_rounds)
     h.seconds = time.perf_counter() - t_start
     return h
+
+
+def _n_params(fitted: Mapping[str, Sequence[str]]) -> int:
+    """The number of fitted parameter entries of the effects ``fitted`` ({effect: names})."""
+    return sum(len(est.free_params(e, list(ps) or None)) for e, ps in fitted.items())
+
+
+def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, added: List[str], fitted: Dict[str, List[str]],
+              effects: Optional[Sequence[str]], diags: Sequence[Diagnosis], threads: int, max_iter: int,
+              progress: Optional[Progress]) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]]]]:
+    """Whether ``effect`` (added earlier) is better replaced by another candidate: the
+    model of ``cprob`` without it is diagnosed (the other added effects refitted with each
+    candidate), its best significant candidate put in its place and every added effect
+    refitted; the swap is returned (the new effect, model, problem, intervals and fitted
+    names) when it beats the current model by the significance threshold in BIC (likelihood
+    ratio less ln n_eff per extra parameter, the effects being non-nested) and lowers the
+    held-out error too; else ``None``. A failure keeps the current model."""
+    others = [e for e in added if e != effect]
+    pool = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
+    if not others or not pool:
+        return None
+    try:
+        base = cprob.model.without_effect(effect)
+        bprob = fit_unseen_motion(cprob.with_model(base))
+        d = diagnose(base, run, effects=pool, threads=threads, max_iter=max_iter, problem=bprob, progress=progress,
+                     refit={e: fitted[e] for e in others}, starts=_prior_fits(diags))
+        s = d.best
+        if s is None:
+            return None
+        new_added = others + [s.effect]
+        nf = {e: list(fitted[e]) for e in others}
+        nf[s.effect] = list(s.fitted)
+        m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(base)), new_added, nf, max_iter)
+        p2 = fit_unseen_motion(p2)
+        z_new = p2.residuals(p2.nominal_simulation())
+        z_cur = cprob.residuals(cprob.nominal_simulation())
+        if z_new.shape != z_cur.shape:
+            return None
+        lr, ne = est.log_ratio(cprob, z_cur, z_new, cprob.train)
+        gain = lr - (_n_params(nf) - _n_params(fitted)) * math.log(ne)
+        if not (gain > SCORE_THRESHOLD and p2.error(mask=p2.validation)[0] < cprob.error(mask=cprob.validation)[0]):
+            return None
+    except KeyboardInterrupt:
+        raise
+    except Exception:  # noqa: BLE001 - the current model stands
+        return None
+    order = [s.effect if e == effect else e for e in added]
+    return s.effect, m2, p2, ci2, {e: nf[e] for e in order}
+
+
+def _extras(effect: str, names: Sequence[str]) -> List[str]:
+    """The names among ``names`` that are not fitted by ``effect``'s base law (a richer
+    variant's extra parameters)."""
+    base = {p.name for p in fx.EFFECTS[effect].fit_params}
+    return [k for k in names if k not in base]
+
+
+def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, added: List[str], fitted: Dict[str, List[str]],
+                  effects: Optional[Sequence[str]], diags: Sequence[Diagnosis], threads: int, max_iter: int,
+                  progress: Optional[Progress]) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+    """Whether ``effect``, added with a richer variant's extra parameters, is better back at
+    its base law (the extras neutral) with another effect added: the added effects are
+    refitted with ``effect`` at its base law, that model is diagnosed, and its best
+    significant candidate added and refitted with them. Returned (the new effect, model,
+    problem, intervals, fitted names and the diagnosis) when it beats the current model by
+    the significance threshold in BIC and lowers the held-out error too; else ``None``."""
+    extras = _extras(effect, fitted.get(effect, []))
+    pool = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
+    if not extras or not pool:
+        return None
+    try:
+        params = dict(cprob.model.effects.get(effect, {}))
+        params.update({k: [fx.EFFECTS[effect].params[k].neutral] * fx.EFFECTS[effect].params[k].length for k in extras})
+        nf = {e: (list(fitted[e]) if e != effect else [k for k in fitted[e] if k not in extras]) for e in added}
+        mb, pb, _ = _refit_stable(prob.with_model(cprob.model.with_effects({effect: params})), added, nf, max_iter)
+        pb = fit_unseen_motion(pb)
+        d = diagnose(mb, run, effects=pool, threads=threads, max_iter=max_iter, problem=pb, progress=progress, refit=nf, starts=_prior_fits(diags))
+        s = d.best
+        if s is None:
+            return None
+        nf[s.effect] = list(s.fitted)
+        new_added = list(added) + [s.effect]
+        m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(mb)), new_added, nf, max_iter)
+        p2 = fit_unseen_motion(p2)
+        z_new = p2.residuals(p2.nominal_simulation())
+        z_cur = cprob.residuals(cprob.nominal_simulation())
+        if z_new.shape != z_cur.shape:
+            return None
+        lr, ne = est.log_ratio(cprob, z_cur, z_new, cprob.train)
+        gain = lr - (_n_params(nf) - _n_params(fitted)) * math.log(ne)
+        if not (gain > SCORE_THRESHOLD and p2.error(mask=p2.validation)[0] < cprob.error(mask=cprob.validation)[0]):
+            return None
+    except KeyboardInterrupt:
+        raise
+    except Exception:  # noqa: BLE001 - the current model stands
+        return None
+    return s.effect, m2, p2, ci2, nf, d
+
+
+def _prior_fits(diags: Sequence[Diagnosis]) -> Dict[str, Dict[str, List[float]]]:
+    """Each effect's most recent tested fit over the rounds ``diags`` (its fitted
+    parameters only), offered as one more start in the next round."""
+    out: Dict[str, Dict[str, List[float]]] = {}
+    for d in diags:
+        for s in d.suspects:
+            if s.tested and math.isfinite(s.score) and s.fitted:
+                out[s.effect] = {k: list(s.params[k]) for k in s.fitted if k in s.params}
+    return out
 
 
 def _model_at_floor(prob: ReplayProblem, error: float, per: Mapping[str, float]) -> bool:
@@ -1304,6 +1468,11 @@ def _conclude(h: History, max_rounds: int) -> str:
     parts: List[str] = []
     for i in range(1, len(h.steps)):
         prev, st = h.steps[i - 1], h.steps[i]
+        if st.removed and st.swapped_in:
+            e = st.swapped_in
+            ptxt = _fmt_params({k: v for k, v in st.params.get(e, {}).items() if k in st.ci95.get(e, {})}, st.ci95.get(e, {})) or _fmt_params(st.params.get(e, {}), {})
+            parts.append(f"replaced {st.removed} by {e} ({ptxt}): {st.removed} stood in for it; the error fell from {prev.error:.3g} to {st.error:.3g} noise units")
+            continue
         if st.removed:
             parts.append(f"removed {st.removed} again (with {', '.join(st.effects)} refitted it explains nothing more; error {prev.error:.3g} → {st.error:.3g})")
             continue
@@ -1315,7 +1484,8 @@ def _conclude(h: History, max_rounds: int) -> str:
         moved = sorted(((c, prev.channel_error.get(c, math.nan), st.channel_error.get(c, math.nan)) for c in st.channel_error),
                        key=lambda x: -(x[1] - x[2]) if math.isfinite(x[1] - x[2]) else 0.0)[:3]
         ch = ", ".join(f"{c} {a:.2g}× → {b:.2g}× noise" for c, a, b in moved if a - b > 0.05 * a)
-        parts.append(f"added {e} ({ptxt}): the systematic error fell from {prev.error:.3g} to {st.error:.3g} noise units ({100 * drop:.0f} % less)"
+        reset = f", with {st.law_reset} back at its base law (its richer variant had stood in for {e})" if st.law_reset else ""
+        parts.append(f"added {e} ({ptxt}){reset}: the systematic error fell from {prev.error:.3g} to {st.error:.3g} noise units ({100 * drop:.0f} % less)"
                      + (f"; on {ch}" if ch else ""))
     last = h.steps[-1]
     d_last = h.diagnoses[-1] if h.diagnoses and h.diagnoses[-1].problem is not None and h.diagnoses[-1].problem.model is last.model else None
