@@ -1293,9 +1293,23 @@ def improve(
     return h
 
 
-def _n_params(fitted: Mapping[str, Sequence[str]]) -> int:
-    """The number of fitted parameter entries of the effects ``fitted`` ({effect: names})."""
-    return sum(len(est.free_params(e, list(ps) or None)) for e, ps in fitted.items())
+def _n_params(fitted: Mapping[str, Sequence[str]], flat: np.ndarray) -> int:
+    """The number of fitted parameter entries of the effects ``fitted`` ({effect: names})
+    in the model of effect vector ``flat`` (entries its structure leaves out not counted)."""
+    return sum(1 for e, ps in fitted.items() for pi in est.free_params(e, list(ps) or None) if not _left_out(flat, *pi))
+
+
+def _beats(new: ReplayProblem, fitted_new: Mapping[str, Sequence[str]], cur: ReplayProblem, fitted_cur: Mapping[str, Sequence[str]]) -> bool:
+    """Whether the model of ``new`` beats the (non-nested) model of ``cur`` on the same run:
+    its BIC gain (likelihood ratio on the training samples less ln n_eff per extra fitted
+    parameter) passes the significance threshold, and it lowers the held-out error too."""
+    z_new = new.residuals(new.nominal_simulation())
+    z_cur = cur.residuals(cur.nominal_simulation())
+    if z_new.shape != z_cur.shape:
+        return False
+    lr, ne = est.log_ratio(cur, z_cur, z_new, cur.train)
+    gain = lr - (_n_params(fitted_new, new.model.effects_flat) - _n_params(fitted_cur, cur.model.effects_flat)) * math.log(ne)
+    return bool(gain > SCORE_THRESHOLD and new.error(mask=new.validation)[0] < cur.error(mask=cur.validation)[0])
 
 
 def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, added: List[str], fitted: Dict[str, List[str]],
@@ -1327,13 +1341,7 @@ def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
         nf[s.effect] = list(s.fitted)
         m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(base)), new_added, nf, max_iter)
         p2 = fit_unseen_motion(p2)
-        z_new = p2.residuals(p2.nominal_simulation())
-        z_cur = cprob.residuals(cprob.nominal_simulation())
-        if z_new.shape != z_cur.shape:
-            return None
-        lr, ne = est.log_ratio(cprob, z_cur, z_new, cprob.train)
-        gain = lr - (_n_params(nf) - _n_params(fitted)) * math.log(ne)
-        if not (gain > SCORE_THRESHOLD and p2.error(mask=p2.validation)[0] < cprob.error(mask=cprob.validation)[0]):
+        if not _beats(p2, nf, cprob, fitted):
             return None
     except KeyboardInterrupt:
         raise
@@ -1377,13 +1385,7 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
         new_added = list(added) + [s.effect]
         m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(mb)), new_added, nf, max_iter)
         p2 = fit_unseen_motion(p2)
-        z_new = p2.residuals(p2.nominal_simulation())
-        z_cur = cprob.residuals(cprob.nominal_simulation())
-        if z_new.shape != z_cur.shape:
-            return None
-        lr, ne = est.log_ratio(cprob, z_cur, z_new, cprob.train)
-        gain = lr - (_n_params(nf) - _n_params(fitted)) * math.log(ne)
-        if not (gain > SCORE_THRESHOLD and p2.error(mask=p2.validation)[0] < cprob.error(mask=cprob.validation)[0]):
+        if not _beats(p2, nf, cprob, fitted):
             return None
     except KeyboardInterrupt:
         raise
