@@ -76,6 +76,19 @@ named (``Suspect.identifiability``).
 **Evidence.** Each suspect carries the residual signature of ``effects.md`` measured on
 the nominal residual (e.g. the regression of the torque residual on sign(q̇) and q̇ for
 friction, the delay that best aligns the measurement for a sensor delay).
+
+**The loop** (:func:`improve`) adds the best significant effect, refits every added
+effect jointly and diagnoses again; from round 2 each candidate is screened with the added
+effects held, the best :data:`JOINT_TOP` are refitted with them, and every fit also starts
+from the same effect's fit of the round before. A greedy first round can pick one effect
+for the error of two; three steps undo it. *Backward*: an effect added earlier that the
+refitted model no longer needs (by the rules that add one) is removed. *Swap*: an effect
+added earlier is replaced by the best candidate for the model without it when that model
+beats the current one (:func:`_beats`: BIC gain over the threshold, held-out error lower).
+*Base law*: when nothing is significant but the model is not at its floor, an effect added
+with a variant's extra parameters (a payload's centre-of-mass offset) is set back to its
+base law and the best candidate then added, on the same test. Each history step names its
+``round``.
 """
 
 from __future__ import annotations
