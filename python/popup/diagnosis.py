@@ -1390,6 +1390,9 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
         nf = {e: (list(fitted[e]) if e != effect else [k for k in fitted[e] if k not in extras]) for e in added}
         mb, pb, _ = _refit_stable(prob.with_model(cprob.model.with_effects({effect: params})), added, nf, max_iter)
         pb = fit_unseen_motion(pb)
+        z_b, z_c = pb.residuals(pb.nominal_simulation()), cprob.residuals(cprob.nominal_simulation())
+        if z_b.shape == z_c.shape and est.log_ratio(cprob, z_b, z_c, cprob.train)[0] < SCORE_THRESHOLD:
+            return None  # the extras explain nothing: the round just done already diagnosed this model
         d = diagnose(mb, run, effects=pool, threads=threads, max_iter=max_iter, problem=pb, progress=progress, refit=nf, starts=_prior_fits(diags))
         s = d.best
         if s is None:
