@@ -1342,26 +1342,47 @@ def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
     try:
         # the others refitted without it first: fitted beside a stand-in they are biased
         # (a payload fitted beside a backlash standing in for drag was 0.69 × the truth)
-        base, bprob, _ = _refit_stable(prob.with_model(cprob.model.without_effect(effect)), others, {e: fitted[e] for e in others}, max_iter)
+        _, bprob, _ = _refit_stable(prob.with_model(cprob.model.without_effect(effect)), others, {e: fitted[e] for e in others}, max_iter)
         bprob = fit_unseen_motion(bprob)
-        d = diagnose(base, run, effects=pool, threads=threads, max_iter=max_iter, problem=bprob, progress=progress,
-                     refit={e: fitted[e] for e in others}, starts=_prior_fits(diags))
+    except KeyboardInterrupt:
+        raise
+    except Exception:  # noqa: BLE001 - the current model stands
+        return None
+    best = _best_added(prob, run, bprob, others, {e: list(fitted[e]) for e in others}, pool, diags, threads, max_iter, progress, cprob, fitted)
+    if best is None:
+        return None
+    c, m2, p2, ci2, nf, _ = best
+    order = [c if e == effect else e for e in added]
+    return c, m2, p2, ci2, {e: nf[e] for e in order}
+
+
+def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept: List[str], fitted: Dict[str, List[str]], pool: List[str],
+                diags: Sequence[Diagnosis], threads: int, max_iter: int,
+                progress: Optional[Progress], cur: ReplayProblem,
+                fitted_cur: Mapping[str, Sequence[str]]) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+    """The model of ``base`` with the best significant candidate among ``pool`` added (the
+    candidates diagnosed with the effects ``kept``, fitted names ``fitted``, refitted with
+    each; the best added and everything refitted jointly), if it beats the current model
+    ``cur`` (:func:`_beats`). Returns (its name, the model, its problem with its own unseen
+    motion, intervals, fitted names, the diagnosis), or ``None``: no candidate significant,
+    the current model better, or a failure (the current model stands)."""
+    try:
+        d = diagnose(base.model, run, effects=pool, threads=threads, max_iter=max_iter, problem=base, progress=progress, refit=fitted,
+                     starts=_prior_fits(diags))
         s = d.best
         if s is None:
             return None
-        new_added = others + [s.effect]
-        nf = {e: list(fitted[e]) for e in others}
+        nf = dict(fitted)
         nf[s.effect] = list(s.fitted)
-        m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(base)), new_added, nf, max_iter)
+        m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(base.model)), list(kept) + [s.effect], nf, max_iter)
         p2 = fit_unseen_motion(p2)
-        if not _beats(p2, nf, cprob, fitted):
+        if not _beats(p2, nf, cur, fitted_cur):
             return None
     except KeyboardInterrupt:
         raise
     except Exception:  # noqa: BLE001 - the current model stands
         return None
-    order = [s.effect if e == effect else e for e in added]
-    return s.effect, m2, p2, ci2, {e: nf[e] for e in order}
+    return s.effect, m2, p2, ci2, nf, d
 
 
 def _extras(effect: str, names: Sequence[str]) -> List[str]:
@@ -1388,26 +1409,16 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
         params = dict(cprob.model.effects.get(effect, {}))
         params.update({k: [fx.EFFECTS[effect].params[k].neutral] * fx.EFFECTS[effect].params[k].length for k in extras})
         nf = {e: (list(fitted[e]) if e != effect else [k for k in fitted[e] if k not in extras]) for e in added}
-        mb, pb, _ = _refit_stable(prob.with_model(cprob.model.with_effects({effect: params})), added, nf, max_iter)
+        _, pb, _ = _refit_stable(prob.with_model(cprob.model.with_effects({effect: params})), added, nf, max_iter)
         pb = fit_unseen_motion(pb)
         z_b, z_c = pb.residuals(pb.nominal_simulation()), cprob.residuals(cprob.nominal_simulation())
         if z_b.shape == z_c.shape and est.log_ratio(cprob, z_b, z_c, cprob.train)[0] < SCORE_THRESHOLD:
             return None  # the extras explain nothing: the round just done already diagnosed this model
-        d = diagnose(mb, run, effects=pool, threads=threads, max_iter=max_iter, problem=pb, progress=progress, refit=nf, starts=_prior_fits(diags))
-        s = d.best
-        if s is None:
-            return None
-        nf[s.effect] = list(s.fitted)
-        new_added = list(added) + [s.effect]
-        m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(mb)), new_added, nf, max_iter)
-        p2 = fit_unseen_motion(p2)
-        if not _beats(p2, nf, cprob, fitted):
-            return None
     except KeyboardInterrupt:
         raise
     except Exception:  # noqa: BLE001 - the current model stands
         return None
-    return s.effect, m2, p2, ci2, nf, d
+    return _best_added(prob, run, pb, added, nf, pool, diags, threads, max_iter, progress, cprob, fitted)
 
 
 def _prior_fits(diags: Sequence[Diagnosis]) -> Dict[str, Dict[str, List[float]]]:
