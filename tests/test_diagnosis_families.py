@@ -633,6 +633,7 @@ def test_an_effect_absorbed_by_the_first_one_is_found_in_round_two(tmp_path):
     assert math.isinf(end.params["torsion"]["k_t"][1])  # link 2 stays rigid through the refits
     js = h.to_dict()
     assert [st["round"] for st in js["history"]] == [0, 1, 2]
+    assert list(h.to_pandas()["change"]) == ["", "+ torsion", "+ payload_mass"]
 
 
 @pytest.mark.slow

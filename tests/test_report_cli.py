@@ -83,12 +83,40 @@ def test_history_and_diagnosis_objects_plot_and_tabulate():
     assert h.effects == ["payload_mass"]
     df = h.to_pandas()
     assert list(df["effects"]) == ["nominal", "payload_mass"]
+    assert list(df["round"]) == [0, 1] and list(df["change"]) == ["", "+ payload_mass"]
     assert df["error"].iloc[1] < df["error"].iloc[0]
     ax = h.plot()
     assert len(ax.lines) >= 2
     ax = h.diagnoses[0].plot()
     assert ax.patches
     assert h.model.effects["payload_mass"]["delta_kg"][0] == pytest.approx(0.3, abs=0.02)
+
+
+def test_history_names_swaps_removals_and_a_law_set_back():
+    """The history's table and conclusion say what each step of the loop changed."""
+    from popup.diagnosis import History, HistoryStep, _conclude
+
+    ch = {"tau1": 1.0}
+    steps = [
+        HistoryStep([], {}, 90.0, {"tau1": 90.0}),
+        HistoryStep(["backlash"], {"backlash": {"gap": [0.01, 0.0, 0.0]}}, 30.0, ch, round=1),
+        HistoryStep(["backlash", "payload_mass"], {"payload_mass": {"delta_kg": [0.1]}}, 9.0, ch, round=2),
+        HistoryStep(["air_drag", "payload_mass"], {"air_drag": {"cd": [7.0]}, "payload_mass": {"delta_kg": [0.12]}}, 2.0, ch, round=2,
+                    removed="backlash", swapped_in="air_drag"),
+        HistoryStep(["air_drag", "payload_mass", "torsion"], {"torsion": {"k_t": [225.0, 240.0]}}, 1.0, ch, round=3, law_reset="payload_mass"),
+        HistoryStep(["payload_mass", "torsion"], {}, 1.0, ch, round=3, removed="air_drag"),
+    ]
+    h = History(steps, [], "")
+    df = h.to_pandas()
+    assert list(df["round"]) == [0, 1, 2, 2, 3, 3]
+    assert list(df["change"]) == ["", "+ backlash", "+ payload_mass", "backlash → air_drag", "+ torsion (payload_mass at its base law)", "− air_drag"]
+    text = _conclude(h, 4)
+    assert "replaced backlash by air_drag (cd=7): backlash stood in for it; the error fell from 9 to 2 noise units" in text
+    assert "added torsion (k_t=225/240), with payload_mass back at its base law (its richer variant had stood in for torsion)" in text
+    assert "removed air_drag again" in text
+    js = h.to_dict()["history"]
+    assert [x["round"] for x in js] == [0, 1, 2, 2, 3, 3]
+    assert js[3]["swapped_in"] == "air_drag" and js[3]["removed"] == "backlash" and js[4]["law_reset"] == "payload_mass"
 
 
 def test_rollout_count_is_the_number_of_simulations_run(monkeypatch):

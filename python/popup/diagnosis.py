@@ -606,12 +606,15 @@ class History:
         return f"History(effects={self.effects}, error {fall}{', incomplete' if self.error else ''})"
 
     def to_pandas(self) -> "pd.DataFrame":
-        """One row per step: effects, systematic error (whole run, held out) and each
-        channel's noise multiple."""
+        """One row per step: its round, what it changed (+ added, − removed, a → b swapped),
+        effects, systematic error (whole run, held out) and each channel's noise multiple."""
         pd = _pd()
         rows = []
         for i, s in enumerate(self.steps):
-            row: Dict[str, Any] = {"step": i, "effects": " + ".join(s.effects) or "nominal", "error": s.error, "validation_error": s.validation_error}
+            change = (f"{s.removed} → {s.swapped_in}" if s.swapped_in else f"− {s.removed}" if s.removed
+                      else (f"+ {s.effects[-1]} ({s.law_reset} at its base law)" if s.law_reset else f"+ {s.effects[-1]}") if s.effects and i else "")
+            row: Dict[str, Any] = {"step": i, "round": s.round, "change": change, "effects": " + ".join(s.effects) or "nominal", "error": s.error,
+                                   "validation_error": s.validation_error}
             row.update({f"noise× {c}": v for c, v in s.channel_error.items()})
             rows.append(row)
         return pd.DataFrame(rows).set_index("step")

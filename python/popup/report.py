@@ -88,7 +88,9 @@ def to_html(result: Union[History, Diagnosis], *, title: str = "popup diagnosis"
     parts.append(_img(d0.plot(), "error with each effect fitted"))
     if len(h.diagnoses) > 1:
         for i, d in enumerate(h.diagnoses[1:], 2):
-            parts.append(f"<h3>Round {i}: after adding {html.escape(', '.join(h.steps[i - 1].effects))}</h3>")
+            st = next((x for x in h.steps if d.problem is not None and x.model is d.problem.model), None)
+            has = st.effects if st is not None else h.steps[min(i - 1, len(h.steps) - 1)].effects
+            parts.append(f"<h3>Round {i}: the model with {html.escape(', '.join(has) or 'nothing added')}</h3>")
             parts.append(f"<p>{html.escape(d.conclusion)}</p>")
             parts.append(d.to_pandas().head(5).to_html(float_format=lambda x: f"{x:.4g}"))
     parts.append("<h2>3. Error history</h2>")
