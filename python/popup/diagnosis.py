@@ -1219,6 +1219,7 @@ def improve(
     diags: List[Diagnosis] = []
     added: List[str] = []
     fitted_params: Dict[str, List[str]] = {}
+    swap_tried: Set[str] = set()
     current, cprob = model, prob
     error = ""
     rnd = 0
@@ -1278,12 +1279,13 @@ def improve(
                                              validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e,
                                              unseen_compliance=cprob.compliance.tolist(), round=rnd))
             # swap step: an effect added earlier may have stood in for two (the greedy first
-            # round picks one effect for the error of both); each is tried replaced by the
-            # best candidate for the model without it, and the swap is kept when the
+            # round picks one effect for the error of both); each is tried once replaced by
+            # the best candidate for the model without it, and the swap is kept when the
             # likelihood prefers it
             for e in list(added[:-1]):
-                if e not in added or _at_floor(steps[-1], prob):
+                if e not in added or e in swap_tried or _at_floor(steps[-1], prob):
                     continue
+                swap_tried.add(e)  # once per effect: each try is a whole round of fits
                 sw = _try_swap(prob, run, cprob, e, added, fitted_params, effects, diags, threads, max_iter, prog)
                 if sw is None:
                     continue
