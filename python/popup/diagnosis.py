@@ -570,7 +570,9 @@ class History:
         (swap step) or adds one with an earlier effect back at its base law; each names
         its ``round``.
     diagnoses : list of Diagnosis
-        The diagnosis of each round (round i diagnoses ``steps[i]``).
+        The diagnosis of each round: the first of the model as given, each later one of the
+        model the round before left (for a base-law step, of the model with that law set
+        back); ``Diagnosis.problem.model`` is the model it diagnosed.
     conclusion : str
         Built from the whole history: what was added (value, interval, how far the error
         fell overall and on the channels it acts on), then what is left.
