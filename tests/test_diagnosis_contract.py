@@ -251,3 +251,34 @@ def test_held_out_samples_an_effect_does_not_act_on_neither_confirm_nor_refute_i
     assert not _silent_on(mask, z0, z1)
     assert not _silent_on(mask, z0, np.full_like(z0, np.nan))  # a failed run is not silent
     assert not _silent_on(np.zeros(200, dtype=bool), z0, z0)  # no held-out samples: nothing to say
+
+
+def test_the_cheap_screen_fully_fits_only_its_best_and_still_finds_the_effect(nominal, tmp_path):
+    """``diagnose(screen=1)`` (the loop's rounds from the third on): each candidate is fitted
+    from its fit of an earlier round alone, and only the best of that screen gets the full
+    multi-start fit. The earlier fits here are of the model *without* the payload (biased by
+    its absence, as in the loop); friction is still found, on the truth and as the plain
+    diagnosis fits it, and the others say they were only screened."""
+    t, q = popup.synth.lab_trajectory(6.0, rate=250.0, seed=21)
+    truth = nominal.with_effect("payload_mass", delta_kg=0.3).with_effect("joint_friction", tau_c=[1.0, 1.5, 0.5], b=[0.2, 0.2, 0.1])
+    run = popup.synth.measured_run(truth, t, q, tmp_path, seed=21)
+    cands = ["joint_friction", "air_drag", "sensor_delay"]
+    d1 = dg.diagnose(nominal, run, effects=cands + ["payload_mass"])
+    starts = dg._prior_fits([d1])
+    assert set(cands) <= set(starts)
+    with_payload = nominal.with_effect("payload_mass", delta_kg=0.3)
+    full = dg.diagnose(with_payload, run, effects=cands, starts=starts)
+    quick = dg.diagnose(with_payload, run, effects=cands, starts=starts, screen=1)
+    assert quick.best is not None and quick.best.effect == "joint_friction" and full.best.effect == "joint_friction"
+    for k in ("tau_c", "b"):
+        np.testing.assert_allclose(quick.best.params[k], truth.effects["joint_friction"][k], rtol=0.05, atol=0.02)
+    others = [s for s in quick.suspects if s.effect != "joint_friction"]
+    assert all("screened from its fit of the round before only" in s.message for s in others), [s.message for s in others]
+    assert all(not s.significant for s in others)
+    # the screened candidate's full fit is the plain diagnosis's
+    for k in ("tau_c", "b"):
+        np.testing.assert_allclose(quick.best.params[k], full.best.params[k], rtol=1e-3, atol=1e-4)
+    assert quick.best.score == pytest.approx(full.best.score, rel=1e-3)
+    # without earlier fits there is nothing to screen from: every candidate gets the full fit
+    plain = dg.diagnose(with_payload, run, effects=cands, screen=1)
+    assert not any("screened" in s.message for s in plain.suspects)

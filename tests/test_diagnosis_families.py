@@ -596,8 +596,10 @@ def test_the_swap_step_replaces_an_effect_that_stood_in_for_a_missing_one(tmp_pa
     _, cur, _ = dg._refit_stable(prob.with_model(s.apply(m0).with_effects({"payload_mass": {"delta_kg": 0.05}})), ["wrinkling", "payload_mass"], fitted, 15)
     cur = fit_unseen_motion(cur)
     assert dg._still_needed(cur, "wrinkling", fitted["wrinkling"])
-    sw = dg._try_swap(prob, run, cur, "wrinkling", ["wrinkling", "payload_mass"], fitted, ["wrinkling", "payload_mass", "air_drag"], [], 0, 15, None)
+    log = []
+    sw = dg._try_swap(prob, run, cur, "wrinkling", ["wrinkling", "payload_mass"], fitted, ["wrinkling", "payload_mass", "air_drag"], [], 0, 15, None, log)
     assert sw is not None
+    assert len(log) == 1 and log[0].startswith("swap of wrinkling (candidates air_drag): air_drag kept (BIC gain"), log
     new, model, nprob, _, nf = sw
     assert new == "air_drag" and list(nf) == ["air_drag", "payload_mass"]
     assert nprob.error()[0] < 0.1 * cur.error()[0]
@@ -605,7 +607,9 @@ def test_the_swap_step_replaces_an_effect_that_stood_in_for_a_missing_one(tmp_pa
     assert model.effects["payload_mass"]["delta_kg"][0] == pytest.approx(truth["effects"]["payload_mass"]["delta_kg"], rel=0.05)
     assert "wrinkling" not in model.effects
     # the true model is not swapped away: no candidate left beats it
-    assert dg._try_swap(prob, run, nprob, "payload_mass", ["air_drag", "payload_mass"], nf, ["wrinkling", "payload_mass", "air_drag"], [], 0, 15, None) is None
+    log = []
+    assert dg._try_swap(prob, run, nprob, "payload_mass", ["air_drag", "payload_mass"], nf, ["wrinkling", "payload_mass", "air_drag"], [], 0, 15, None, log) is None
+    assert len(log) == 1 and log[0].startswith("swap of payload_mass (candidates wrinkling): ") and ("the model stands" in log[0] or "not kept" in log[0]), log
 
 
 def test_an_effect_absorbed_by_the_first_one_is_found_in_round_two(tmp_path):

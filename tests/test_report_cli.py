@@ -106,7 +106,8 @@ def test_history_names_swaps_removals_and_a_law_set_back():
         HistoryStep(["air_drag", "payload_mass", "torsion"], {"torsion": {"k_t": [225.0, 240.0]}}, 1.0, ch, round=3, law_reset="payload_mass"),
         HistoryStep(["payload_mass", "torsion"], {}, 1.0, ch, round=3, removed="air_drag"),
     ]
-    h = History(steps, [], "")
+    notes = ["swap of payload_mass (candidates torsion): torsion not kept (BIC gain -3.1 (threshold 10), held-out error 2 → 2.1)"]
+    h = History(steps, [], "", notes=notes)
     df = h.to_pandas()
     assert list(df["round"]) == [0, 1, 2, 2, 3, 3]
     assert list(df["change"]) == ["", "+ backlash", "+ payload_mass", "backlash → air_drag", "+ torsion (payload_mass at its base law)", "− air_drag"]
@@ -117,6 +118,10 @@ def test_history_names_swaps_removals_and_a_law_set_back():
     js = h.to_dict()["history"]
     assert [x["round"] for x in js] == [0, 1, 2, 2, 3, 3]
     assert js[3]["swapped_in"] == "air_drag" and js[3]["removed"] == "backlash" and js[4]["law_reset"] == "payload_mass"
+    assert h.to_dict()["notes"] == notes  # what the swap tried and why it was not kept
+    from popup.report import to_html
+
+    assert "<li>swap of payload_mass (candidates torsion): torsion not kept (BIC gain -3.1" in to_html(h)
 
 
 def test_rollout_count_is_the_number_of_simulations_run(monkeypatch):

@@ -80,14 +80,20 @@ friction, the delay that best aligns the measurement for a sensor delay).
 **The loop** (:func:`improve`) adds the best significant effect, refits every added
 effect jointly and diagnoses again; from round 2 each candidate is screened with the added
 effects held, the best :data:`JOINT_TOP` are refitted with them, and every fit also starts
-from the same effect's fit of the round before. A greedy first round can pick one effect
-for the error of two; three steps undo it. *Backward*: an effect added earlier that the
-refitted model no longer needs (by the rules that add one) is removed. *Swap*: an effect
-added earlier is replaced by the best candidate for the model without it when that model
-beats the current one (:func:`_beats`: BIC gain over the threshold, held-out error lower).
-*Base law*: when nothing is significant but the model is not at its floor, an effect added
-with a variant's extra parameters (a payload's centre-of-mass offset) is set back to its
-base law and the best candidate then added, on the same test. Each history step names its
+from the same effect's fit of the round before. From round 3 on (two effects in the model)
+the screen itself is cheap: each candidate is fitted from its fit of the round before
+alone, and only the :data:`JOINT_TOP` best (and any significant) get the full multi-start
+fit (``diagnose(screen=)``). A greedy first round can pick one effect for the error of two;
+three steps undo it. *Backward*: an effect added earlier that the refitted model no longer
+needs (by the rules that add one) is removed. *Swap*: an effect added earlier is replaced
+by the best candidate for the model without it when that model beats the current one
+(:func:`_beats`: BIC gain over the threshold, held-out error lower). *Base law*: when
+nothing is significant but the model is not at its floor, an effect added with a variant's
+extra parameters (a payload's centre-of-mass offset) is set back to its base law and the
+best candidate then added, on the same test. The swap and the base law offer only
+candidates some round found significant (an effect another stood in for explained much of
+the same error when that one was chosen), each (effect, candidate) pair once; what they
+tried and why it was or was not kept is in ``History.notes``. Each history step names its
 ``round``.
 """
 
@@ -578,6 +584,10 @@ class History:
         fell overall and on the channels it acts on), then what is left.
     error : str
         Empty when complete; else what stopped the loop (the rounds before are kept).
+    notes : list of str
+        What the swap and base-law steps tried (the effect, the candidates), and why each
+        was kept or not (its BIC gain and held-out error, no candidate significant, or the
+        failure that left the model as it was).
     """
 
     steps: List[HistoryStep]
@@ -587,6 +597,7 @@ class History:
     seconds: float = 0.0
     error: str = ""
     noise: Dict[str, float] = field(default_factory=dict)
+    notes: List[str] = field(default_factory=list)
 
     @property
     def complete(self) -> bool:
@@ -627,8 +638,9 @@ class History:
         and after, at the noise floor, the encoder floor (the replay error the encoder's own
         error causes, a multiple of the noise), the nominal residual's isolated spikes: count, first
         times [s], share of the excess; :meth:`ReplayProblem.spikes`), ``suspects`` (first round, every effect ranked),
-        ``history`` (each step's effects and error), ``rounds``, ``conclusion``,
-        ``complete`` and, when a round failed, ``error``."""
+        ``history`` (each step's effects and error), ``rounds``, ``conclusion``, ``notes``
+        (what the swap and base-law steps tried), ``complete`` and, when a round failed,
+        ``error``."""
         first = self.diagnoses[0] if self.diagnoses else None
         floor = first.at_floor if first else []
         spikes: Dict[str, Dict[str, Any]] = {}
@@ -660,6 +672,7 @@ class History:
             "rounds": [d.to_dict() for d in self.diagnoses],
             "residual_white": bool(self.diagnoses[-1].residual_white) if self.diagnoses else False,
             "conclusion": self.conclusion,
+            "notes": list(self.notes),
             "complete": self.complete,
             "seconds": self.seconds,
         }
@@ -677,7 +690,8 @@ class History:
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 4))
         x = np.arange(len(self.steps))
-        labels = ["nominal"] + [(f"−{s.removed}" if s.removed else f"+{s.effects[-1]}") for s in self.steps[1:]]
+        labels = ["nominal"] + [(f"{s.removed}→{s.swapped_in}" if s.swapped_in else f"−{s.removed}" if s.removed else f"+{s.effects[-1]}")
+                                for s in self.steps[1:]]
         chans = list(self.steps[0].channel_error)
         for c in chans:
             ax.plot(x, [s.channel_error.get(c, np.nan) for s in self.steps], color="0.7", lw=1)
@@ -972,6 +986,20 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
     return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
 
 
+def _screen_fit(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int, start: Mapping[str, Sequence[float]]) -> Suspect:
+    """``name`` at its base law fitted from ``start`` alone (its fit of an earlier round): the
+    cheap screen of :func:`diagnose`'s ``screen``."""
+    n0 = prob.nfev
+    base = {p.name for p in fx.EFFECTS[name].fit_params}
+    st = {k: list(v) for k, v in start.items() if k in base}
+    try:
+        fitted, note = _fit_candidate(prob, name, _STRUCTURE.get(name), None, st or None, None, max_iter, seeds=False)
+    except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
+        return Suspect(name, False, -math.inf, {}, {}, math.nan, math.nan, {}, ev, tested=False,
+                       message=f"not tested: {type(e).__name__}: {e}")
+    return fitted.suspect(ev, prob.nfev - n0, note)
+
+
 def _gain(a: _Fitted, b: _Fitted) -> float:
     """BIC gain of fit ``a`` over fit ``b`` of the same run: their likelihood ratio taken
     directly, with one effective sample count (``a``'s residual), less ln n_eff per extra
@@ -1047,6 +1075,7 @@ def diagnose(
     refit: Optional[Mapping[str, Sequence[str]]] = None,
     rank_at_floor: bool = False,
     starts: Optional[Mapping[str, Mapping[str, Sequence[float]]]] = None,
+    screen: int = 0,
 ) -> Diagnosis:
     """Rank every effect of the library (or ``effects``) by how much of the model's
     systematic error on ``run`` it explains, each fitted, validated on held-out samples,
@@ -1062,6 +1091,12 @@ def diagnose(
     ``starts``: ``{effect: {parameter: values}}``, one more start for that effect's fit (as
     :func:`improve` passes each candidate's fit of the round before: an effect fitted well
     alone keeps that basin once another effect is in the model).
+    ``screen``: when > 0, each candidate with a start in ``starts`` is first fitted from
+    that start alone (its base law: no seeds, continuation or variants), and only the
+    ``screen`` best of that screen, and any significant in it, get the full multi-start
+    fit, and at most ``screen`` are refitted jointly with ``refit``; the others keep their
+    screened fit, saying so (as :func:`improve` does from its third round on, and with
+    ``screen=1`` for the swap and base-law steps, which take only the best candidate).
     """
     t_start = time.perf_counter()
     names = list(fx.EFFECT_NAMES if effects is None else effects)
@@ -1094,17 +1129,37 @@ def diagnose(
     # with earlier effects to refit, every candidate is first screened with them held, and
     # only the JOINT_TOP best are refitted jointly (the refit's extra Jacobian columns are
     # most of a round's cost, and the ranking's tail does not need them)
-    total = len(todo) + (min(JOINT_TOP, len(todo)) if also else 0)
-    for i, name in enumerate(todo):
+    quick: Dict[str, Suspect] = {}
+    n_joint = min(JOINT_TOP, len(todo), screen or JOINT_TOP) if also else 0
+    if screen > 0 and starts:
+        with_start = [n for n in todo if starts.get(n)]
+        for i, name in enumerate(with_start):
+            if progress is not None:
+                progress({"effect": f"{name} (screen)", "done": i, "total": len(with_start) + min(screen, len(todo)) + n_joint})
+            evs[name] = _evidence(name, cmp, prob)
+            quick[name] = _screen_fit(prob, name, evs[name], max_iter, starts[name])
+        order = sorted(quick.values(), key=_rank_key)
+        full = {q.effect for q in order[:screen]} | {q.effect for q in order if q.significant} | {n for n in todo if n not in quick}
+        todo = [n for n in todo if n in full] + [n for n in todo if n not in full]
+        done0 = len(with_start)
+    else:
+        full, done0 = set(todo), 0
+    total = done0 + len(full) + n_joint
+    for i, name in enumerate(n for n in todo if n in full):
         if progress is not None:
-            progress({"effect": name, "done": i, "total": total})
-        evs[name] = _evidence(name, cmp, prob)
+            progress({"effect": name, "done": done0 + i, "total": total})
+        evs.setdefault(name, _evidence(name, cmp, prob))
         suspects.append(_try_effect(prob, name, evs[name], max_iter, None, (starts or {}).get(name)))
+    for name in todo:
+        if name not in full:
+            q = quick[name]
+            q.message = "; ".join(x for x in (q.message, f"screened from its fit of the round before only (not among the {screen} best of the screen)") if x)
+            suspects.append(q)
     suspects.sort(key=_rank_key)
     if also:
-        for i, s in enumerate(suspects[:JOINT_TOP]):
+        for i, s in enumerate(suspects[:n_joint]):
             if progress is not None:
-                progress({"effect": f"{s.effect} (joint refit)", "done": len(todo) + i, "total": total})
+                progress({"effect": f"{s.effect} (joint refit)", "done": done0 + len(full) + i, "total": total})
             if s.tested and math.isfinite(s.score):
                 suspects[i] = _refit_jointly(prob, s, evs[s.effect], max_iter, also, (starts or {}).get(s.effect))
         suspects.sort(key=_rank_key)
@@ -1221,14 +1276,17 @@ def improve(
     diags: List[Diagnosis] = []
     added: List[str] = []
     fitted_params: Dict[str, List[str]] = {}
-    swap_tried: Set[str] = set()
+    swap_tried: Dict[str, Set[str]] = {}
+    notes: List[str] = []  # what the swap and base-law steps tried, and why it was (not) kept
     current, cprob = model, prob
     error = ""
     rnd = 0
 
+    stage, stage_round = "", 0  # what a fit of a swap or base-law step is for, and its round
+
     def prog(info: Dict[str, Any]) -> None:
         if progress is not None:
-            progress(dict(info, round=rnd + 1))
+            progress(dict(info, round=stage_round if stage else rnd + 1, effect=f"{stage}{info.get('effect', '')}"))
 
     try:
         d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, rank_at_floor=rank_at_floor)
@@ -1243,7 +1301,7 @@ def improve(
                 cand = s.apply(current)
                 cprob = prob.with_model(cand)
                 if progress is not None:
-                    progress({"round": rnd + 1, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
+                    progress({"round": rnd, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
                 current, cprob, ci = _refit_stable(cprob, added, fitted_params, max_iter)
                 cprob = fit_unseen_motion(cprob)  # the torques changed with the model
             else:
@@ -1254,7 +1312,11 @@ def improve(
                 lw = None
                 if added and not _at_floor(steps[-1], prob):
                     for e in list(added):
-                        lw = _try_base_law(prob, run, cprob, e, added, fitted_params, effects, diags, threads, max_iter, prog)
+                        # as for the swap: the effect the extras stood in for was significant alone
+                        pool = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects)]
+                        stage, stage_round = f"{e} at its base law: ", rnd + 1
+                        lw = _try_base_law(prob, run, cprob, e, added, fitted_params, pool, diags, threads, max_iter, prog, notes) if pool else None
+                        stage = ""
                         if lw is not None:
                             reset = e
                             break
@@ -1285,10 +1347,17 @@ def improve(
             # the best candidate for the model without it, and the swap is kept when the
             # likelihood prefers it
             for e in list(added[:-1]):
-                if e not in added or e in swap_tried or _at_floor(steps[-1], prob):
+                if e not in added or _at_floor(steps[-1], prob):
                     continue
-                swap_tried.add(e)  # once per effect: each try is a whole round of fits
-                sw = _try_swap(prob, run, cprob, e, added, fitted_params, effects, diags, threads, max_iter, prog)
+                # only candidates some round found significant: one that e stood in for
+                # explained much of the same error when e was chosen; each pair is tried once
+                pool = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects) and c not in swap_tried.get(e, set())]
+                if not pool:
+                    continue
+                swap_tried.setdefault(e, set()).update(pool)
+                stage, stage_round = f"swap out {e}: ", rnd  # part of the round just done
+                sw = _try_swap(prob, run, cprob, e, added, fitted_params, pool, diags, threads, max_iter, prog, notes)
+                stage = ""
                 if sw is None:
                     continue
                 c, current, cprob, ci, fitted_params = sw
@@ -1300,14 +1369,16 @@ def improve(
             remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
             if not remaining or _at_floor(steps[-1], prob):
                 break
+            # from the third round on, a cheap screen from each candidate's last fit picks
+            # the few that get the full multi-start fit (pairs are found by round 2)
             d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, refit=fitted_params,
-                         starts=_prior_fits(diags))
+                         starts=_prior_fits(diags), screen=JOINT_TOP if len(added) >= 2 else 0)
             diags.append(d)
     except KeyboardInterrupt:
         raise
     except Exception as e:  # noqa: BLE001 - nothing lost: the rounds before are returned
         error = f"round {rnd + 1} failed: {type(e).__name__}: {e}"
-    h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise)
+    h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise, notes=notes)
     h.conclusion = _conclude(h, max_rounds)
     h.seconds = time.perf_counter() - t_start
     return h
@@ -1319,33 +1390,38 @@ def _n_params(fitted: Mapping[str, Sequence[str]], flat: np.ndarray) -> int:
     return sum(1 for e, ps in fitted.items() for pi in est.free_params(e, list(ps) or None) if not _left_out(flat, *pi))
 
 
-def _beats(new: ReplayProblem, fitted_new: Mapping[str, Sequence[str]], cur: ReplayProblem, fitted_cur: Mapping[str, Sequence[str]]) -> bool:
+def _beats(new: ReplayProblem, fitted_new: Mapping[str, Sequence[str]], cur: ReplayProblem, fitted_cur: Mapping[str, Sequence[str]]) -> Tuple[bool, str]:
     """Whether the model of ``new`` beats the (non-nested) model of ``cur`` on the same run:
     its BIC gain (likelihood ratio on the training samples less ln n_eff per extra fitted
-    parameter) passes the significance threshold, and it lowers the held-out error too."""
+    parameter) passes the significance threshold, and it lowers the held-out error too; and
+    the numbers, as text."""
     z_new = new.residuals(new.nominal_simulation())
     z_cur = cur.residuals(cur.nominal_simulation())
     if z_new.shape != z_cur.shape:
-        return False
+        return False, "not comparable (different output grids)"
     lr, ne = est.log_ratio(cur, z_cur, z_new, cur.train)
     gain = lr - (_n_params(fitted_new, new.model.effects_flat) - _n_params(fitted_cur, cur.model.effects_flat)) * math.log(ne)
-    return bool(gain > SCORE_THRESHOLD and new.error(mask=new.validation)[0] < cur.error(mask=cur.validation)[0])
+    v_new, v_cur = new.error(mask=new.validation)[0], cur.error(mask=cur.validation)[0]
+    ok = bool(gain > SCORE_THRESHOLD and v_new < v_cur)
+    return ok, f"BIC gain {gain:.1f} (threshold {SCORE_THRESHOLD:g}), held-out error {v_cur:.3g} → {v_new:.3g}"
 
 
 def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, added: List[str], fitted: Dict[str, List[str]],
               effects: Optional[Sequence[str]], diags: Sequence[Diagnosis], threads: int, max_iter: int,
-              progress: Optional[Progress]) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]]]]:
+              progress: Optional[Progress], log: Optional[List[str]] = None) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]]]]:
     """Whether ``effect`` (added earlier) is better replaced by another candidate: the
     model of ``cprob`` without it is diagnosed (the other added effects refitted with each
     candidate), its best significant candidate put in its place and every added effect
     refitted; the swap is returned (the new effect, model, problem, intervals and fitted
     names) when it beats the current model by the significance threshold in BIC (likelihood
     ratio less ln n_eff per extra parameter, the effects being non-nested) and lowers the
-    held-out error too; else ``None``. A failure keeps the current model."""
+    held-out error too; else ``None``. A failure keeps the current model. ``log``: a line
+    saying what was tried and why it was (not) kept is appended."""
     others = [e for e in added if e != effect]
     pool = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
     if not others or not pool:
         return None
+    what = f"swap of {effect} (candidates {', '.join(pool)})"
     try:
         # the others refitted without it first: fitted beside a stand-in they are biased
         # (a payload fitted beside a backlash standing in for drag was 0.69 × the truth)
@@ -1353,9 +1429,11 @@ def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
         bprob = fit_unseen_motion(bprob)
     except KeyboardInterrupt:
         raise
-    except Exception:  # noqa: BLE001 - the current model stands
+    except Exception as ex:  # noqa: BLE001 - the current model stands
+        _note(log, f"{what}: failed refitting {', '.join(others)} without it ({type(ex).__name__}: {ex}); the model stands")
         return None
-    best = _best_added(prob, run, bprob, others, {e: list(fitted[e]) for e in others}, pool, diags, threads, max_iter, progress, cprob, fitted)
+    best = _best_added(prob, run, bprob, others, {e: list(fitted[e]) for e in others}, pool, diags, threads, max_iter, progress, cprob, fitted,
+                       log=log, what=what)
     if best is None:
         return None
     c, m2, p2, ci2, nf, _ = best
@@ -1366,30 +1444,42 @@ def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
 def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept: List[str], fitted: Dict[str, List[str]], pool: List[str],
                 diags: Sequence[Diagnosis], threads: int, max_iter: int,
                 progress: Optional[Progress], cur: ReplayProblem,
-                fitted_cur: Mapping[str, Sequence[str]]) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+                fitted_cur: Mapping[str, Sequence[str]], log: Optional[List[str]] = None, what: str = "") -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
     """The model of ``base`` with the best significant candidate among ``pool`` added (the
     candidates diagnosed with the effects ``kept``, fitted names ``fitted``, refitted with
     each; the best added and everything refitted jointly), if it beats the current model
     ``cur`` (:func:`_beats`). Returns (its name, the model, its problem with its own unseen
     motion, intervals, fitted names, the diagnosis), or ``None``: no candidate significant,
-    the current model better, or a failure (the current model stands)."""
+    the current model better, or a failure (the current model stands). ``log``: a line
+    saying what (``what``) was tried and why it was (not) kept is appended."""
+    what = what or "candidates " + ", ".join(pool)
     try:
+        # only the best candidate is taken: the cheap screen picks the one that gets the full fit
         d = diagnose(base.model, run, effects=pool, threads=threads, max_iter=max_iter, problem=base, progress=progress, refit=fitted,
-                     starts=_prior_fits(diags))
+                     starts=_prior_fits(diags), screen=1)
         s = d.best
         if s is None:
+            _note(log, f"{what}: no candidate significant; the model stands")
             return None
         nf = dict(fitted)
         nf[s.effect] = list(s.fitted)
         m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(base.model)), list(kept) + [s.effect], nf, max_iter)
         p2 = fit_unseen_motion(p2)
-        if not _beats(p2, nf, cur, fitted_cur):
+        ok, why = _beats(p2, nf, cur, fitted_cur)
+        _note(log, f"{what}: {s.effect} {'kept' if ok else 'not kept'} ({why})")
+        if not ok:
             return None
     except KeyboardInterrupt:
         raise
-    except Exception:  # noqa: BLE001 - the current model stands
+    except Exception as ex:  # noqa: BLE001 - the current model stands
+        _note(log, f"{what}: failed ({type(ex).__name__}: {ex}); the model stands")
         return None
     return s.effect, m2, p2, ci2, nf, d
+
+
+def _note(log: Optional[List[str]], line: str) -> None:
+    if log is not None:
+        log.append(line)
 
 
 def _extras(effect: str, names: Sequence[str]) -> List[str]:
@@ -1401,7 +1491,7 @@ def _extras(effect: str, names: Sequence[str]) -> List[str]:
 
 def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, added: List[str], fitted: Dict[str, List[str]],
                   effects: Optional[Sequence[str]], diags: Sequence[Diagnosis], threads: int, max_iter: int,
-                  progress: Optional[Progress]) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+                  progress: Optional[Progress], log: Optional[List[str]] = None) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
     """Whether ``effect``, added with a richer variant's extra parameters, is better back at
     its base law (the extras neutral) with another effect added: the added effects are
     refitted with ``effect`` at its base law, that model is diagnosed, and its best
@@ -1412,6 +1502,7 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
     pool = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
     if not extras or not pool:
         return None
+    what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(pool)})"
     try:
         params = dict(cprob.model.effects.get(effect, {}))
         params.update({k: [fx.EFFECTS[effect].params[k].neutral] * fx.EFFECTS[effect].params[k].length for k in extras})
@@ -1423,9 +1514,18 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
             return None  # the extras explain nothing: the round just done already diagnosed this model
     except KeyboardInterrupt:
         raise
-    except Exception:  # noqa: BLE001 - the current model stands
+    except Exception as ex:  # noqa: BLE001 - the current model stands
+        _note(log, f"{what}: failed refitting at the base law ({type(ex).__name__}: {ex}); the model stands")
         return None
-    return _best_added(prob, run, pb, added, nf, pool, diags, threads, max_iter, progress, cprob, fitted)
+    return _best_added(prob, run, pb, added, nf, pool, diags, threads, max_iter, progress, cprob, fitted, log=log, what=what)
+
+
+def _significant_in(diags: Sequence[Diagnosis]) -> List[str]:
+    """The effects significant in any of the diagnoses ``diags``, in order of first sight."""
+    out: List[str] = []
+    for d in diags:
+        out.extend(s.effect for s in d.suspects if s.significant and s.effect not in out)
+    return out
 
 
 def _prior_fits(diags: Sequence[Diagnosis]) -> Dict[str, Dict[str, List[float]]]:

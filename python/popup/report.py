@@ -73,7 +73,7 @@ def to_html(result: Union[History, Diagnosis], *, title: str = "popup diagnosis"
     parts.append("<table><tr><th>channel</th><th>noise σ</th><th>nominal (× noise)</th><th>final (× noise)</th>"
                  "<th>encoder floor (× noise)</th><th>signal at noise floor</th></tr>" + rows + "</table>")
     if not h.diagnoses:
-        return _page(title, parts, h)
+        return _page(title, parts + _loop_notes(h), h)
     d0 = h.diagnoses[0]
     cmp = d0.comparison
     parts.append("<h2>1. Comparison of the nominal model with the run</h2>")
@@ -95,12 +95,20 @@ def to_html(result: Union[History, Diagnosis], *, title: str = "popup diagnosis"
             parts.append(d.to_pandas().head(5).to_html(float_format=lambda x: f"{x:.4g}"))
     parts.append("<h2>3. Error history</h2>")
     parts.append(h.to_pandas().to_html(float_format=lambda x: f"{x:.4g}"))
+    parts.extend(_loop_notes(h))
     parts.append(_img(h.plot(), "the fall of the error"))
     if len(h.diagnoses) > 1 or len(h.steps) > 1:
         last = h.diagnoses[-1].comparison
         parts.append(_img(last.plot("overlay"), "measured vs final model"))
     parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in cmp.notes) + "</ul>")
     return _page(title, parts, h)
+
+
+def _loop_notes(h: History) -> List[str]:
+    """What the loop's swap and base-law steps tried, and why each was (not) kept."""
+    if not h.notes:
+        return []
+    return ["<p><b>Swaps and base laws tried:</b></p><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in h.notes) + "</ul>"]
 
 
 def _page(title: str, parts: List[str], h: History) -> str:
