@@ -282,3 +282,34 @@ def test_the_cheap_screen_fully_fits_only_its_best_and_still_finds_the_effect(no
     # without earlier fits there is nothing to screen from: every candidate gets the full fit
     plain = dg.diagnose(with_payload, run, effects=cands, screen=1)
     assert not any("screened" in s.message for s in plain.suspects)
+
+
+def test_the_swap_offers_only_candidates_some_round_found_significant(nominal, tmp_path, monkeypatch):
+    """The loop's swap step (an effect added earlier replaced by another) offers only the
+    candidates that some round's diagnosis found significant, each (effect, candidate)
+    pair once, and says in ``History.notes`` what it tried."""
+    t, q = popup.synth.lab_trajectory(6.0, rate=250.0, seed=23)
+    # a sensor delay the candidates leave out keeps the model above its floor after the
+    # pair is in (the swap is not tried at the floor: nothing is left to gain)
+    truth = (nominal.with_effect("payload_mass", delta_kg=0.3).with_effect("joint_friction", tau_c=[1.0, 1.5, 0.5], b=[0.2, 0.2, 0.1])
+             .with_effect("sensor_delay", imu=[0.001]))
+    run = popup.synth.measured_run(truth, t, q, tmp_path, seed=23)
+    offered = []
+    real = dg._try_swap
+
+    def spy(prob, run_, cprob, effect, added, fitted, pool, *rest):
+        offered.append((effect, list(pool), list(added)))
+        return real(prob, run_, cprob, effect, added, fitted, pool, *rest)
+
+    monkeypatch.setattr(dg, "_try_swap", spy)
+    h = dg.improve(nominal, run, effects=["payload_mass", "joint_friction", "air_drag", "wrinkling"], max_rounds=2)
+    assert not h.error, h.error
+    assert set(h.effects) == {"payload_mass", "joint_friction"}
+    sig = dg._significant_in(h.diagnoses)
+    assert len(sig) > 2, sig  # stand-ins were significant in round 1: there is something to swap in
+    assert offered, "no swap was tried"
+    pairs = [(e, c) for e, pool, _ in offered for c in pool]
+    assert len(pairs) == len(set(pairs))  # each pair once
+    for e, pool, added in offered:
+        assert pool and set(pool) <= set(sig) and not set(pool) & set(added)
+    assert len(h.notes) == len(offered) and all(n.startswith("swap of ") for n in h.notes), h.notes
