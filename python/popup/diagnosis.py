@@ -1511,7 +1511,9 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
         pb = fit_unseen_motion(pb)
         z_b, z_c = pb.residuals(pb.nominal_simulation()), cprob.residuals(cprob.nominal_simulation())
         if z_b.shape == z_c.shape and est.log_ratio(cprob, z_b, z_c, cprob.train)[0] < SCORE_THRESHOLD:
-            return None  # the extras explain nothing: the round just done already diagnosed this model
+            # the extras explain nothing: the round just done already diagnosed this model
+            _note(log, f"{what}: not tried, the extras explain nothing (likelihood ratio below {SCORE_THRESHOLD:g})")
+            return None
     except KeyboardInterrupt:
         raise
     except Exception as ex:  # noqa: BLE001 - the current model stands
@@ -1524,7 +1526,9 @@ def _significant_in(diags: Sequence[Diagnosis]) -> List[str]:
     """The effects significant in any of the diagnoses ``diags``, in order of first sight."""
     out: List[str] = []
     for d in diags:
-        out.extend(s.effect for s in d.suspects if s.significant and s.effect not in out)
+        for s in d.suspects:
+            if s.significant and s.effect not in out:
+                out.append(s.effect)
     return out
 
 
