@@ -1330,42 +1330,54 @@ def improve(
             steps.append(HistoryStep(list(added), {e: current.effects.get(e, {}) for e in added}, err, per, current,
                                      validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, unseen_compliance=cprob.compliance.tolist(),
                                      round=rnd, law_reset=reset))
-            # backward step: an effect added earlier that the refitted model no longer needs
-            # (it stood in for the one just added) is removed
-            for e in list(added[:-1]):
-                if not _still_needed(cprob, e, fitted_params[e]):
-                    added.remove(e)
-                    fitted_params.pop(e)
-                    current, cprob, ci = _refit_stable(cprob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
-                    cprob = fit_unseen_motion(cprob)
+            # backward and swap steps, around the newest effect (the one just added, or
+            # just swapped in: the others are then all "earlier" than it), until no swap
+            # is kept
+            newest = added[-1]
+            while True:
+                # backward step: an effect added earlier that the refitted model no longer
+                # needs (it stood in for the newest) is removed
+                for e in [x for x in added if x != newest]:
+                    if not _still_needed(cprob, e, fitted_params[e]):
+                        added.remove(e)
+                        fitted_params.pop(e)
+                        current, cprob, ci = _refit_stable(cprob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
+                        cprob = fit_unseen_motion(cprob)
+                        err, per = cprob.error()
+                        steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
+                                                 validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e,
+                                                 unseen_compliance=cprob.compliance.tolist(), round=rnd))
+                # swap step: an effect added earlier may have stood in for two (the greedy
+                # first round picks one effect for the error of both); it is tried replaced
+                # by the best candidate for the model without it, kept when the likelihood
+                # prefers it. After a swap the effect added this round is "earlier" too (a
+                # stand-in picked beside the old stand-in: wrinkling beside a backlash that
+                # stood in for drag, a payload missing)
+                swapped = False
+                for e in [x for x in added if x != newest]:
+                    if _at_floor(steps[-1], prob):
+                        break
+                    # only candidates some round found significant: one that e stood in for
+                    # explained much of the same error when e was chosen; each pair once
+                    pool = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects) and c not in swap_tried.get(e, set())]
+                    if not pool:
+                        continue
+                    swap_tried.setdefault(e, set()).update(pool)
+                    stage, stage_round = f"swap out {e}: ", rnd  # part of the round just done
+                    sw = _try_swap(prob, run, cprob, e, added, fitted_params, pool, diags, threads, max_iter, prog, notes)
+                    stage = ""
+                    if sw is None:
+                        continue
+                    c, current, cprob, ci, fitted_params = sw
+                    added[added.index(e)] = c
                     err, per = cprob.error()
                     steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
-                                             validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e,
+                                             validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e, swapped_in=c,
                                              unseen_compliance=cprob.compliance.tolist(), round=rnd))
-            # swap step: an effect added earlier may have stood in for two (the greedy first
-            # round picks one effect for the error of both); each is tried once replaced by
-            # the best candidate for the model without it, and the swap is kept when the
-            # likelihood prefers it
-            for e in list(added[:-1]):
-                if e not in added or _at_floor(steps[-1], prob):
-                    continue
-                # only candidates some round found significant: one that e stood in for
-                # explained much of the same error when e was chosen; each pair is tried once
-                pool = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects) and c not in swap_tried.get(e, set())]
-                if not pool:
-                    continue
-                swap_tried.setdefault(e, set()).update(pool)
-                stage, stage_round = f"swap out {e}: ", rnd  # part of the round just done
-                sw = _try_swap(prob, run, cprob, e, added, fitted_params, pool, diags, threads, max_iter, prog, notes)
-                stage = ""
-                if sw is None:
-                    continue
-                c, current, cprob, ci, fitted_params = sw
-                added[added.index(e)] = c
-                err, per = cprob.error()
-                steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
-                                         validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e, swapped_in=c,
-                                         unseen_compliance=cprob.compliance.tolist(), round=rnd))
+                    newest, swapped = c, True
+                    break
+                if not swapped:
+                    break
             remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
             if not remaining or _at_floor(steps[-1], prob):
                 break
