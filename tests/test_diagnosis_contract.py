@@ -313,3 +313,51 @@ def test_the_swap_offers_only_candidates_some_round_found_significant(nominal, t
     for e, pool, added in offered:
         assert pool and set(pool) <= set(sig) and not set(pool) & set(added)
     assert len(h.notes) == len(offered) and all(n.startswith("swap of ") for n in h.notes), h.notes
+
+
+def test_noise_floors_a_large_misfit_biased_are_rechecked_on_the_final_model(nominal, tmp_path):
+    """The noise floors come from the nominal residual. Under a large misfit (a payload
+    0.4 kg off) the estimator is biased: down by 4× on channels whose noise is coloured (a
+    sensor's 45 Hz low-pass at 200 Hz: neighbouring samples alike, and the misfit's rough
+    part hides the colour), up on others. The final model's residual gives each channel's
+    noise back, and the loop says so with the error in those units."""
+    from scipy.signal import butter, lfilter
+
+    from popup.problem import ReplayProblem
+
+    t, q = popup.synth.lab_trajectory(8.0, rate=200.0, seed=29)
+    rng = np.random.default_rng(3)
+    b, a = butter(2, 45.0 / 100.0)
+    imu = ["imu1_ax", "imu1_ay", "imu1_az", "imu2_ax", "imu2_ay", "imu2_az"]
+    true = {}
+
+    def coloured(tt):
+        out = {}
+        for c in imu:
+            x = 0.007 * lfilter(b, a, rng.normal(0.0, 1.0, len(tt) + 200))[200:]
+            true[c] = float(np.std(x))
+            out[c] = x
+        return out
+
+    truth = nominal.with_effect("payload_mass", delta_kg=0.4)
+    run = popup.synth.measured_run(truth, t, q, tmp_path, seed=29, noise={"tau": 0.05, "ee": 2e-4, "imu": 0.0}, disturbance=coloured)
+    p0 = ReplayProblem(nominal, run, threads=0)
+    assert min(p0.noise[c] / true[c] for c in imu) < 0.5  # the bias the check is for
+    cp = p0.with_model(truth)
+    new = cp.noise_from()
+    for c in imu:
+        assert new[c] == pytest.approx(true[c], rel=0.15), (c, new[c], true[c])
+    e, per = cp.error()
+    assert e > 1.0  # the truth looks far from its floor in the biased units
+    text = dg._noise_recheck(cp, dg.HistoryStep(["payload_mass"], {}, e, per))
+    assert "imu2_ay" in text and "imu2_az" in text
+    s_new = float(text.rsplit("systematic error is ", 1)[1].split(" ")[0])
+    assert s_new < 0.3
+    # floors estimated from the right model: nothing to report
+    pt = ReplayProblem(truth, run, threads=0)
+    assert dg._noise_recheck(pt, dg.HistoryStep(["payload_mass"], {}, *pt.error())) == ""
+    # the loop reports it, in its notes and its conclusion
+    h = dg.improve(nominal, run, effects=["payload_mass"], max_rounds=1)
+    assert h.effects == ["payload_mass"]
+    assert h.notes and h.notes[-1].startswith("the noise floors estimated from the final model's residual differ")
+    assert h.notes[-1] in h.conclusion

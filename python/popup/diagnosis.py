@@ -113,7 +113,7 @@ from . import estimate as est
 from .compare import Comparison, compare
 from .exceptions import InputError, StepTooLargeError
 from .io import MeasuredRun
-from .problem import ERROR_DEFINITION, SPIKE_SIGMA, ReplayProblem
+from .problem import ERROR_DEFINITION, SPIKE_SIGMA, ReplayProblem, systematic
 from .unseen import fit_unseen_motion
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -137,6 +137,7 @@ __all__ = [
     "VARIANTS",
     "JOINT_TOP",
     "FLOOR_MULTIPLE",
+    "NOISE_RECHECK",
     "SPIKE_SHARE",
     "PLAY_READINGS",
 ]
@@ -1390,10 +1391,45 @@ def improve(
         raise
     except Exception as e:  # noqa: BLE001 - nothing lost: the rounds before are returned
         error = f"round {rnd + 1} failed: {type(e).__name__}: {e}"
+    recheck = _noise_recheck(cprob, steps[-1]) if len(steps) > 1 and not error else ""
+    if recheck:
+        notes.append(recheck)
     h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise, notes=notes)
     h.conclusion = _conclude(h, max_rounds)
+    if recheck:
+        h.conclusion = h.conclusion[:-1] + "; " + recheck + "."
     h.seconds = time.perf_counter() - t_start
     return h
+
+
+#: A channel's noise floor estimated from the final model's residual is reported when it
+#: differs from the one the loop used by more than this factor, either way (the
+#: estimator's own scatter is a few %).
+NOISE_RECHECK = 1.2
+
+
+def _noise_recheck(cprob: ReplayProblem, last: HistoryStep) -> str:
+    """The noise floors re-estimated from the final model's residual (``cprob``): when some
+    channel's differs from the floor used (estimated from the model as given) by more than
+    :data:`NOISE_RECHECK` either way, a sentence naming them and giving the final
+    systematic error with those floors; else "". A large misfit biases the estimator: up
+    by its own rough part, or down where it hides a coloured noise (neighbouring samples
+    alike under a sensor's low-pass), on MuJoCo-like runs by 0.77-4×."""
+    try:
+        new = cprob.noise_from()
+    except Exception:  # noqa: BLE001 - a check, not a result
+        return ""
+    old = cprob.noise
+    ratio = {c: new[c] / old[c] for c in old if old[c] > 0 and math.isfinite(new.get(c, math.nan)) and new[c] > 0}
+    off = {c: r for c, r in ratio.items() if r > NOISE_RECHECK or r < 1.0 / NOISE_RECHECK}
+    if not off:
+        return ""
+    ms = np.array([(v / off.get(c, 1.0)) ** 2 for c, v in last.channel_error.items()])
+    s_new = systematic(ms)
+    txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(off.items(), key=lambda kv: -abs(math.log(kv[1]))))
+    return (f"the noise floors estimated from the final model's residual differ from those used (estimated from the model as "
+            f"given, whose larger error biases the estimator: up, or down where it hides a coloured noise): {txt}; with them "
+            f"the final model's systematic error is {s_new:.3g} noise units instead of {last.error:.3g}")
 
 
 def _n_params(fitted: Mapping[str, Sequence[str]], flat: np.ndarray) -> int:

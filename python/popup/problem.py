@@ -493,6 +493,17 @@ class ReplayProblem:
         """White-noise floor σ per channel (channel unit)."""
         return {c: float(s) for c, s in zip(self.channels, self.sigma)}
 
+    def noise_from(self, z: Optional[np.ndarray] = None) -> Dict[str, float]:
+        """Each channel's noise floor σ [channel unit] estimated as at set-up (from the
+        nominal residual), but from the residual ``z`` (n, C) in noise units (default: the
+        model as given). A better model's residual has less systematic error to hide the
+        noise's colour from the estimator (a sensor's low-pass makes neighbouring samples
+        alike; under a large misfit the estimate falls back to neighbouring samples)."""
+        if z is None:
+            z = self.residuals(self.nominal_simulation())
+        r = np.asarray(z) * self.sigma
+        return {c: _floor_of(self.time, r[:, j], self.measured[:, j]) for j, c in enumerate(self.channels)}
+
     @property
     def encoder_sigma(self) -> np.ndarray:
         """(C,) std [channel unit] of the replay error that the encoder's own error causes
