@@ -349,15 +349,16 @@ def test_noise_floors_a_large_misfit_biased_are_rechecked_on_the_final_model(nom
         assert new[c] == pytest.approx(true[c], rel=0.15), (c, new[c], true[c])
     e, per = cp.error()
     assert e > 1.0  # the truth looks far from its floor in the biased units
-    text = dg._noise_recheck(cp, dg.HistoryStep(["payload_mass"], {}, e, per))
-    assert "imu2_ay" in text and "imu2_az" in text
-    s_new = float(text.rsplit("systematic error is ", 1)[1].split(" ")[0])
-    assert s_new < 0.3
+    text, s_new, per_new = dg._noise_recheck(cp, dg.HistoryStep(["payload_mass"], {}, e, per))
+    assert "imu2_ay" in text and "imu2_az" in text and f"{s_new:.3g} noise units instead of {e:.3g}" in text
+    assert s_new < 0.3 and max(per_new.values()) < 1.2
     # floors estimated from the right model: nothing to report
     pt = ReplayProblem(truth, run, threads=0)
-    assert dg._noise_recheck(pt, dg.HistoryStep(["payload_mass"], {}, *pt.error())) == ""
-    # the loop reports it, in its notes and its conclusion
+    assert dg._noise_recheck(pt, dg.HistoryStep(["payload_mass"], {}, *pt.error()))[0] == ""
+    # the loop reports it, in its notes and its conclusion, which says what is left is noise
     h = dg.improve(nominal, run, effects=["payload_mass"], max_rounds=1)
     assert h.effects == ["payload_mass"]
     assert h.notes and h.notes[-1].startswith("the noise floors estimated from the final model's residual differ")
     assert h.notes[-1] in h.conclusion
+    assert "what is left is at the noise floor once each channel's floor is re-estimated on the final model" in h.conclusion
+    assert "not explained by the library" not in h.conclusion

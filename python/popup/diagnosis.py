@@ -1391,13 +1391,11 @@ def improve(
         raise
     except Exception as e:  # noqa: BLE001 - nothing lost: the rounds before are returned
         error = f"round {rnd + 1} failed: {type(e).__name__}: {e}"
-    recheck = _noise_recheck(cprob, steps[-1]) if len(steps) > 1 and not error else ""
-    if recheck:
-        notes.append(recheck)
+    recheck = _noise_recheck(cprob, steps[-1]) if len(steps) > 1 and not error else ("", math.nan, {})
+    if recheck[0]:
+        notes.append(recheck[0])
     h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise, notes=notes)
-    h.conclusion = _conclude(h, max_rounds)
-    if recheck:
-        h.conclusion = h.conclusion[:-1] + "; " + recheck + "."
+    h.conclusion = _conclude(h, max_rounds, recheck)
     h.seconds = time.perf_counter() - t_start
     return h
 
@@ -1408,28 +1406,29 @@ def improve(
 NOISE_RECHECK = 1.2
 
 
-def _noise_recheck(cprob: ReplayProblem, last: HistoryStep) -> str:
+def _noise_recheck(cprob: ReplayProblem, last: HistoryStep) -> Tuple[str, float, Dict[str, float]]:
     """The noise floors re-estimated from the final model's residual (``cprob``): when some
     channel's differs from the floor used (estimated from the model as given) by more than
     :data:`NOISE_RECHECK` either way, a sentence naming them and giving the final
-    systematic error with those floors; else "". A large misfit biases the estimator: up
+    systematic error with those floors, that error and the channels' noise multiples with
+    them; else ``("", nan, {})``. A large misfit biases the estimator: up
     by its own rough part, or down where it hides a coloured noise (neighbouring samples
     alike under a sensor's low-pass), on MuJoCo-like runs by 0.77-4×."""
     try:
         new = cprob.noise_from()
     except Exception:  # noqa: BLE001 - a check, not a result
-        return ""
+        return "", math.nan, {}
     old = cprob.noise
     ratio = {c: new[c] / old[c] for c in old if old[c] > 0 and math.isfinite(new.get(c, math.nan)) and new[c] > 0}
     off = {c: r for c, r in ratio.items() if r > NOISE_RECHECK or r < 1.0 / NOISE_RECHECK}
     if not off:
-        return ""
-    ms = np.array([(v / off.get(c, 1.0)) ** 2 for c, v in last.channel_error.items()])
-    s_new = systematic(ms)
+        return "", math.nan, {}
+    per = {c: v / off.get(c, 1.0) for c, v in last.channel_error.items()}
+    s_new = systematic(np.array([v * v for v in per.values()]))
     txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(off.items(), key=lambda kv: -abs(math.log(kv[1]))))
     return (f"the noise floors estimated from the final model's residual differ from those used (estimated from the model as "
             f"given, whose larger error biases the estimator: up, or down where it hides a coloured noise): {txt}; with them "
-            f"the final model's systematic error is {s_new:.3g} noise units instead of {last.error:.3g}")
+            f"the final model's systematic error is {s_new:.3g} noise units instead of {last.error:.3g}"), s_new, per
 
 
 def _n_params(fitted: Mapping[str, Sequence[str]], flat: np.ndarray) -> int:
@@ -1675,9 +1674,11 @@ def _refit(prob: ReplayProblem, added: List[str], fitted: Dict[str, List[str]], 
     return new, nprob, ci
 
 
-def _conclude(h: History, max_rounds: int) -> str:
+def _conclude(h: History, max_rounds: int, recheck: Tuple[str, float, Dict[str, float]] = ("", math.nan, {})) -> str:
     """The whole history in words: what was added (value, interval, the fall of the error
-    overall and on the channels it acts on), then what is left."""
+    overall and on the channels it acts on), then what is left; ``recheck``: the noise
+    floors re-estimated on the final model (:func:`_noise_recheck`), said where they differ
+    (and what is left is at the noise floor in them, if it is)."""
     parts: List[str] = []
     for i in range(1, len(h.steps)):
         prev, st = h.steps[i - 1], h.steps[i]
@@ -1721,6 +1722,8 @@ def _conclude(h: History, max_rounds: int) -> str:
         where = _where(d_last, last.channel_error) if d_last is not None else ", ".join(f"{c} {v:.2g}× noise" for c, v in sorted(last.channel_error.items(), key=lambda kv: -kv[1])[:3])
         if d_last is not None and d_last.best is not None and n_added >= max_rounds:
             left = f"stopped after max_rounds = {max_rounds}; {d_last.best.effect} is still significant ({where})"
+        elif recheck[0] and recheck[1] <= AT_FLOOR and max(recheck[2].values(), default=math.inf) <= FLOOR_MULTIPLE:
+            left = f"what is left is at the noise floor once each channel's floor is re-estimated on the final model ({recheck[0]})"
         else:
             left = f"a systematic error of {last.error:.3g} noise units is left that is not explained by the library ({where})"
     if any(c > 0 for c in last.unseen_compliance):
@@ -1730,6 +1733,8 @@ def _conclude(h: History, max_rounds: int) -> str:
     untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses if not d.model_at_floor for s in d.untested})
     if untested:
         parts.append("the ranking is incomplete: " + "; ".join(untested))
+    if recheck[0] and recheck[0] not in left:
+        parts.append(recheck[0])
     if h.error:
         parts.append(f"incomplete: {h.error}; the rounds before it are kept")
     text = "; ".join(parts)
