@@ -588,7 +588,8 @@ class History:
     notes : list of str
         What the swap and base-law steps tried (the effect, the candidates), and why each
         was kept or not (its BIC gain and held-out error, no candidate significant, or the
-        failure that left the model as it was).
+        failure that left the model as it was); last, where the noise floors rechecked on
+        the final model's residual differ from those used (:data:`NOISE_RECHECK`).
     """
 
     steps: List[HistoryStep]
@@ -640,7 +641,7 @@ class History:
         error causes, a multiple of the noise), the nominal residual's isolated spikes: count, first
         times [s], share of the excess; :meth:`ReplayProblem.spikes`), ``suspects`` (first round, every effect ranked),
         ``history`` (each step's effects and error), ``rounds``, ``conclusion``, ``notes``
-        (what the swap and base-law steps tried), ``complete`` and, when a round failed,
+        (what the swap and base-law steps tried, the noise floors rechecked), ``complete`` and, when a round failed,
         ``error``."""
         first = self.diagnoses[0] if self.diagnoses else None
         floor = first.at_floor if first else []
@@ -1278,7 +1279,7 @@ def improve(
     added: List[str] = []
     fitted_params: Dict[str, List[str]] = {}
     swap_tried: Dict[str, Set[str]] = {}
-    notes: List[str] = []  # what the swap and base-law steps tried, and why it was (not) kept
+    notes: List[str] = []  # what the swap and base-law steps tried and why, then the noise recheck
     current, cprob = model, prob
     error = ""
     rnd = 0
