@@ -95,6 +95,13 @@ candidates some round found significant (an effect another stood in for explaine
 the same error when that one was chosen), each (effect, candidate) pair once; what they
 tried and why it was or was not kept is in ``History.notes``. Each history step names its
 ``round``.
+
+**Floors re-estimated.** The floors σ_c come from the nominal residual, whose misfit biases
+the estimator (a rough misfit up; a coloured noise hidden, down). After each step that adds
+or swaps in an effect they are estimated again from the refitted model's residual; a
+channel whose floor moves by more than :data:`NOISE_RECHECK` takes the new one, and the
+history, the later rounds and the conclusion are in it (``History.noise``,
+``History.noise_initial``).
 """
 
 from __future__ import annotations
@@ -103,7 +110,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 import numpy as np
@@ -547,6 +554,8 @@ class HistoryStep:
     unseen_compliance: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     """Per motor joint, the compliance [rad/(N·m)] of the motion inside an encoder reading
     that its replay includes (:mod:`popup.unseen`; zeros: none)."""
+    validation_channel_error: Dict[str, float] = field(default_factory=dict)
+    """Each channel's noise multiple on the held-out samples alone."""
 
     def to_dict(self) -> Dict[str, Any]:
         return {
@@ -561,7 +570,16 @@ class HistoryStep:
             "params": {e: {k: [_num(x) for x in v] for k, v in p.items()} for e, p in self.params.items()},
             "ci95": {e: {k: [_num(x) for x in v] for k, v in p.items()} for e, p in self.ci95.items()},
             "channel_error": {k: _num(v) for k, v in self.channel_error.items()},
+            "validation_channel_error": {k: _num(v) for k, v in self.validation_channel_error.items()},
         }
+
+    def in_floors(self, ratio: Mapping[str, float]) -> "HistoryStep":
+        """The same step in other noise floors: channel c's floor ``ratio[c]`` × the one
+        its multiples are in (channels not named keep theirs)."""
+        per = {c: v / ratio.get(c, 1.0) for c, v in self.channel_error.items()}
+        val = {c: v / ratio.get(c, 1.0) for c, v in self.validation_channel_error.items()}
+        return replace(self, channel_error=per, error=_systematic_of(per),
+                       validation_channel_error=val, validation_error=_systematic_of(val) if val else self.validation_error)
 
 
 @dataclass
@@ -588,8 +606,12 @@ class History:
     notes : list of str
         What the swap and base-law steps tried (the effect, the candidates), and why each
         was kept or not (its BIC gain and held-out error, no candidate significant, or the
-        failure that left the model as it was); last, where the noise floors rechecked on
-        the final model's residual differ from those used (:data:`NOISE_RECHECK`).
+        failure that left the model as it was); and where a refitted model's residual gave
+        some channel's noise floor anew (:data:`NOISE_RECHECK`).
+    noise : dict
+        The noise floor σ per channel (channel unit) every step's error is in: first
+        estimated from the residual of the model as given, then re-estimated from each
+        refitted model's where it differs by more than :data:`NOISE_RECHECK`.
     """
 
     steps: List[HistoryStep]
@@ -600,6 +622,12 @@ class History:
     error: str = ""
     noise: Dict[str, float] = field(default_factory=dict)
     notes: List[str] = field(default_factory=list)
+    noise_initial: Dict[str, float] = field(default_factory=dict)
+    """The floors σ per channel first estimated, from the residual of the model as given
+    (``noise`` holds those every step is in: re-estimated as the model improved)."""
+    encoder_floor: Dict[str, float] = field(default_factory=dict)
+    """Per channel, the replay error the encoder's own error causes as a multiple of the
+    floor in ``noise`` (:attr:`ReplayProblem.encoder_floor`; empty: the first diagnosis's)."""
 
     @property
     def complete(self) -> bool:
@@ -641,7 +669,8 @@ class History:
         error causes, a multiple of the noise), the nominal residual's isolated spikes: count, first
         times [s], share of the excess; :meth:`ReplayProblem.spikes`), ``suspects`` (first round, every effect ranked),
         ``history`` (each step's effects and error), ``rounds``, ``conclusion``, ``notes``
-        (what the swap and base-law steps tried, the noise floors rechecked), ``complete`` and, when a round failed,
+        (what the swap and base-law steps tried, the noise floors re-estimated), ``noise_initial`` (σ per channel
+        as first estimated, before the loop re-estimated any), ``complete`` and, when a round failed,
         ``error``."""
         first = self.diagnoses[0] if self.diagnoses else None
         floor = first.at_floor if first else []
@@ -656,13 +685,14 @@ class History:
             "nominal_error": _num(self.steps[0].error),
             "error_definition": ERROR_DEFINITION,
             "noise": {k: _num(v) for k, v in self.noise.items()},
+            "noise_initial": {k: _num(v) for k, v in (self.noise_initial or self.noise).items()},
             "channels": {
                 c: {
                     "noise_std": _num(self.noise.get(c)),
                     "noise_multiple_nominal": _num(self.steps[0].channel_error.get(c)),
                     "noise_multiple_final": _num(self.steps[-1].channel_error.get(c)),
                     "at_noise_floor": c in floor,
-                    "encoder_floor": _num(first.encoder_floor.get(c, 1.0)) if first else 1.0,
+                    "encoder_floor": _num((self.encoder_floor or (first.encoder_floor if first else {})).get(c, 1.0)),
                     "spikes": spikes.get(c, {}).get("count", 0),
                     "spike_times": spikes.get(c, {}).get("times", []),
                     "spike_share": _num(spikes.get(c, {}).get("share", 0.0)),
@@ -1273,13 +1303,13 @@ def improve(
     if int(max_rounds) < 0:
         raise InputError(f"input max_rounds: {max_rounds} must be ≥ 0")
     prob = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads))
-    e0, per0 = prob.error()
-    steps = [HistoryStep([], {}, e0, per0, model, validation_error=prob.error(mask=prob.validation)[0], unseen_compliance=prob.compliance.tolist())]
+    steps = [_step(prob, [], {}, 0)]
+    noise0 = prob.noise
     diags: List[Diagnosis] = []
     added: List[str] = []
     fitted_params: Dict[str, List[str]] = {}
     swap_tried: Dict[str, Set[str]] = {}
-    notes: List[str] = []  # what the swap and base-law steps tried and why, then the noise recheck
+    notes: List[str] = []  # what the swap and base-law steps tried and why, the floors re-estimated
     current, cprob = model, prob
     error = ""
     rnd = 0
@@ -1328,10 +1358,8 @@ def improve(
                 c, current, cprob, ci, fitted_params, d_law = lw
                 added.append(c)
                 diags.append(d_law)
-            err, per = cprob.error()
-            steps.append(HistoryStep(list(added), {e: current.effects.get(e, {}) for e in added}, err, per, current,
-                                     validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, unseen_compliance=cprob.compliance.tolist(),
-                                     round=rnd, law_reset=reset))
+            steps.append(_step(cprob, added, ci, rnd, law_reset=reset))
+            prob, cprob, steps = _floors_update(prob, cprob, steps, notes, rnd)
             # backward and swap steps, around the newest effect (the one just added, or
             # just swapped in: the others are then all "earlier" than it), until no swap
             # is kept
@@ -1345,10 +1373,7 @@ def improve(
                         fitted_params.pop(e)
                         current, cprob, ci = _refit_stable(cprob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
                         cprob = fit_unseen_motion(cprob)
-                        err, per = cprob.error()
-                        steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
-                                                 validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e,
-                                                 unseen_compliance=cprob.compliance.tolist(), round=rnd))
+                        steps.append(_step(cprob, added, ci, rnd, removed=e))
                 # swap step: an effect added earlier may have stood in for two (the greedy
                 # first round picks one effect for the error of both); it is tried replaced
                 # by the best candidate for the model without it, kept when the likelihood
@@ -1372,10 +1397,8 @@ def improve(
                         continue
                     c, current, cprob, ci, fitted_params = sw
                     added[added.index(e)] = c
-                    err, per = cprob.error()
-                    steps.append(HistoryStep(list(added), {x: current.effects.get(x, {}) for x in added}, err, per, current,
-                                             validation_error=cprob.error(mask=cprob.validation)[0], ci95=ci, removed=e, swapped_in=c,
-                                             unseen_compliance=cprob.compliance.tolist(), round=rnd))
+                    steps.append(_step(cprob, added, ci, rnd, removed=e, swapped_in=c))
+                    prob, cprob, steps = _floors_update(prob, cprob, steps, notes, rnd)
                     newest, swapped = c, True
                     break
                 if not swapped:
@@ -1392,44 +1415,53 @@ def improve(
         raise
     except Exception as e:  # noqa: BLE001 - nothing lost: the rounds before are returned
         error = f"round {rnd + 1} failed: {type(e).__name__}: {e}"
-    recheck = _noise_recheck(cprob, steps[-1]) if len(steps) > 1 and not error else ("", math.nan, {})
-    if recheck[0]:
-        notes.append(recheck[0])
-    h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise, notes=notes)
-    h.conclusion = _conclude(h, max_rounds, recheck)
+    h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise, notes=notes, noise_initial=noise0,
+                encoder_floor=_safe_encoder_floor(prob))
+    h.conclusion = _conclude(h, max_rounds, prob)
     h.seconds = time.perf_counter() - t_start
     return h
 
 
-#: A channel's noise floor estimated from the final model's residual is reported when it
-#: differs from the one the loop used by more than this factor, either way (the
-#: estimator's own scatter is a few %).
+#: A channel's noise floor estimated from a refitted model's residual replaces the one the
+#: loop used when it differs by more than this factor, either way (the estimator's own
+#: scatter is a few %).
 NOISE_RECHECK = 1.2
 
 
-def _noise_recheck(cprob: ReplayProblem, last: HistoryStep) -> Tuple[str, float, Dict[str, float]]:
-    """The noise floors re-estimated from the final model's residual (``cprob``): when some
-    channel's differs from the floor used (estimated from the model as given) by more than
-    :data:`NOISE_RECHECK` either way, a sentence naming them and giving the final
-    systematic error with those floors, that error and the channels' noise multiples with
-    them; else ``("", nan, {})``. A large misfit biases the estimator: up
-    by its own rough part, or down where it hides a coloured noise (neighbouring samples
-    alike under a sensor's low-pass), on MuJoCo-like runs by 0.77-4×."""
+def _noise_recheck(cprob: ReplayProblem) -> Dict[str, float]:
+    """The channels whose noise floor re-estimated from the residual of the model of
+    ``cprob`` (:meth:`ReplayProblem.noise_from`) differs from the one used by more than
+    :data:`NOISE_RECHECK` either way: channel → new/old. A large misfit biases the
+    estimator (up by the residual's own rough part, or down where it hides a coloured
+    noise: neighbouring samples alike under a sensor's low-pass; on MuJoCo-like runs by
+    0.77-4×), so a better model's residual gives the floor back."""
     try:
         new = cprob.noise_from()
     except Exception:  # noqa: BLE001 - a check, not a result
-        return "", math.nan, {}
+        return {}
     old = cprob.noise
     ratio = {c: new[c] / old[c] for c in old if old[c] > 0 and math.isfinite(new.get(c, math.nan)) and new[c] > 0}
-    off = {c: r for c, r in ratio.items() if r > NOISE_RECHECK or r < 1.0 / NOISE_RECHECK}
+    return {c: r for c, r in ratio.items() if r > NOISE_RECHECK or r < 1.0 / NOISE_RECHECK}
+
+
+def _floors_update(prob: ReplayProblem, cprob: ReplayProblem, steps: List[HistoryStep], notes: List[str],
+                   rnd: int) -> Tuple[ReplayProblem, ReplayProblem, List[HistoryStep]]:
+    """The loop's noise floors re-estimated on the model of ``cprob`` (the last step's):
+    where a channel's differs by more than :data:`NOISE_RECHECK` (:func:`_noise_recheck`),
+    the base problem ``prob`` and ``cprob`` take the new floors, every step so far is put
+    in them (one scale, so the fall of the error stays comparable) and a line goes to
+    ``notes``. Later rounds, the floor stop and the conclusion then use them."""
+    off = _noise_recheck(cprob)
     if not off:
-        return "", math.nan, {}
-    per = {c: v / off.get(c, 1.0) for c, v in last.channel_error.items()}
-    s_new = systematic(np.array([v * v for v in per.values()]))
+        return prob, cprob, steps
+    new = {c: cprob.noise[c] * r for c, r in off.items()}
+    last = steps[-1]
+    moved = steps[:-1] + [last.in_floors(off)]
     txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(off.items(), key=lambda kv: -abs(math.log(kv[1]))))
-    return (f"the noise floors estimated from the final model's residual differ from those used (estimated from the model as "
-            f"given, whose larger error biases the estimator: up, or down where it hides a coloured noise): {txt}; with them "
-            f"the final model's systematic error is {s_new:.3g} noise units instead of {last.error:.3g}"), s_new, per
+    notes.append(f"round {rnd}: the noise floors re-estimated from the residual of the model with {' + '.join(last.effects) or 'nothing'} "
+                 f"differ from those used (a larger misfit biases the estimator: up, or down where it hides a coloured noise): {txt}; "
+                 f"every step is now in the new floors (that model's systematic error {last.error:.3g} → {moved[-1].error:.3g} noise units)")
+    return prob.with_noise(new), cprob.with_noise(new), [st.in_floors(off) for st in steps]
 
 
 def _n_params(fitted: Mapping[str, Sequence[str]], flat: np.ndarray) -> int:
@@ -1523,6 +1555,30 @@ def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept
         _note(log, f"{what}: failed ({type(ex).__name__}: {ex}); the model stands")
         return None
     return s.effect, m2, p2, ci2, nf, d
+
+
+def _safe_encoder_floor(prob: ReplayProblem) -> Dict[str, float]:
+    """:attr:`ReplayProblem.encoder_floor`, or ``{}`` where it cannot be computed (the
+    history still goes out)."""
+    try:
+        return dict(prob.encoder_floor)
+    except Exception:  # noqa: BLE001 - a failed round's history is returned whatever
+        return {}
+
+
+def _systematic_of(per: Mapping[str, float]) -> float:
+    """S (:data:`ERROR_DEFINITION`) of the noise multiples ``per`` (channel → r_c)."""
+    return systematic(np.square(np.array(list(per.values()), dtype=np.float64))) if per else math.nan
+
+
+def _step(cprob: ReplayProblem, added: Sequence[str], ci: Dict[str, Dict[str, List[float]]], rnd: int, **kw: Any) -> HistoryStep:
+    """A step of the loop: the model of ``cprob`` with the effects ``added``, its error on
+    every sample and on the held-out ones, per channel and overall."""
+    err, per = cprob.error()
+    verr, vper = cprob.error(mask=cprob.validation)
+    m = cprob.model
+    return HistoryStep(list(added), {e: m.effects.get(e, {}) for e in added}, err, per, m, validation_error=verr, ci95=ci,
+                       unseen_compliance=cprob.compliance.tolist(), round=rnd, validation_channel_error=vper, **kw)
 
 
 def _note(log: Optional[List[str]], line: str) -> None:
@@ -1675,11 +1731,11 @@ def _refit(prob: ReplayProblem, added: List[str], fitted: Dict[str, List[str]], 
     return new, nprob, ci
 
 
-def _conclude(h: History, max_rounds: int, recheck: Tuple[str, float, Dict[str, float]] = ("", math.nan, {})) -> str:
+def _conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) -> str:
     """The whole history in words: what was added (value, interval, the fall of the error
-    overall and on the channels it acts on), then what is left; ``recheck``: the noise
-    floors re-estimated on the final model (:func:`_noise_recheck`), said where they differ
-    (and what is left is at the noise floor in them, if it is)."""
+    overall and on the channels it acts on), then what is left; ``prob``: the run's problem
+    in the floors the steps are in (default: the first diagnosis's), and where the loop
+    re-estimated them (:func:`_floors_update`) the conclusion says so."""
     parts: List[str] = []
     for i in range(1, len(h.steps)):
         prev, st = h.steps[i - 1], h.steps[i]
@@ -1705,7 +1761,7 @@ def _conclude(h: History, max_rounds: int, recheck: Tuple[str, float, Dict[str, 
     last = h.steps[-1]
     d_last = h.diagnoses[-1] if h.diagnoses and h.diagnoses[-1].problem is not None and h.diagnoses[-1].problem.model is last.model else None
     n_added = sum(1 for st in h.steps[1:] if not st.removed)
-    prob0 = h.diagnoses[0].problem if h.diagnoses and h.diagnoses[0].problem is not None else None
+    prob0 = prob if prob is not None else h.diagnoses[0].problem if h.diagnoses and h.diagnoses[0].problem is not None else None
     floor = prob0 is not None and _at_floor(last, prob0)
     if last.error <= AT_FLOOR or floor:
         if last.error <= AT_FLOOR:
@@ -1723,8 +1779,6 @@ def _conclude(h: History, max_rounds: int, recheck: Tuple[str, float, Dict[str, 
         where = _where(d_last, last.channel_error) if d_last is not None else ", ".join(f"{c} {v:.2g}× noise" for c, v in sorted(last.channel_error.items(), key=lambda kv: -kv[1])[:3])
         if d_last is not None and d_last.best is not None and n_added >= max_rounds:
             left = f"stopped after max_rounds = {max_rounds}; {d_last.best.effect} is still significant ({where})"
-        elif recheck[0] and recheck[1] <= AT_FLOOR and max(recheck[2].values(), default=math.inf) <= FLOOR_MULTIPLE:
-            left = f"what is left is at the noise floor once each channel's floor is re-estimated on the final model ({recheck[0]})"
         else:
             left = f"a systematic error of {last.error:.3g} noise units is left that is not explained by the library ({where})"
     if any(c > 0 for c in last.unseen_compliance):
@@ -1734,8 +1788,11 @@ def _conclude(h: History, max_rounds: int, recheck: Tuple[str, float, Dict[str, 
     untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses if not d.model_at_floor for s in d.untested})
     if untested:
         parts.append("the ranking is incomplete: " + "; ".join(untested))
-    if recheck[0] and recheck[0] not in left:
-        parts.append(recheck[0])
+    floors_moved = {c: h.noise[c] / v for c, v in h.noise_initial.items() if v > 0 and c in h.noise and h.noise[c] != v}
+    if floors_moved:
+        txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(floors_moved.items(), key=lambda kv: -abs(math.log(kv[1]))))
+        parts.append(f"every error here is in noise floors re-estimated on the refitted model, the nominal residual's misfit having "
+                     f"biased them ({txt} the first estimate)")
     if h.error:
         parts.append(f"incomplete: {h.error}; the rounds before it are kept")
     text = "; ".join(parts)

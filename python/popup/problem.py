@@ -51,7 +51,7 @@ floor has ``r_c ≈ 1`` whatever the model does and adds nothing.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Dict, List, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -470,6 +470,17 @@ class ReplayProblem:
         p.q_corr = q_corr
         p.q_enc = self.q_base + q_corr if np.any(q_corr != 0) else self.q_base
         p.compliance = np.asarray(compliance, dtype=np.float64).copy()
+        return p
+
+    def with_noise(self, noise: Mapping[str, float]) -> "ReplayProblem":
+        """The same problem with the noise floor σ [channel unit] of the channels named in
+        ``noise`` replaced (the others kept); its simulation is not rerun."""
+        bad = {c: v for c, v in noise.items() if c not in self.channels or not (math.isfinite(float(v)) and float(v) > 0)}
+        if bad:
+            raise InputError(f"with_noise: {bad} are not positive floors of this problem's channels {self.channels}")
+        p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
+        p.sigma = np.array([float(noise.get(c, s)) for c, s in zip(self.channels, self.sigma)])
+        p._nominal = self._nominal
         return p
 
     def with_initial_state(self, q: Any, v: Any) -> "ReplayProblem":

@@ -106,10 +106,10 @@ def to_html(result: Union[History, Diagnosis], *, title: str = "popup diagnosis"
 
 def _loop_notes(h: History) -> List[str]:
     """The loop's notes: what its swap and base-law steps tried and why each was (not)
-    kept, and where the noise floors rechecked on the final model differ."""
+    kept, and where a refitted model's residual gave some channel's noise floor anew."""
     if not h.notes:
         return []
-    return ["<p><b>Notes of the loop</b> (swaps and base laws tried, noise floors rechecked):</p><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in h.notes) + "</ul>"]
+    return ["<p><b>Notes of the loop</b> (swaps and base laws tried, noise floors re-estimated):</p><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in h.notes) + "</ul>"]
 
 
 def _page(title: str, parts: List[str], h: History) -> str:
