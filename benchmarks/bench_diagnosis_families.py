@@ -321,7 +321,10 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
 
 
 def _commit() -> Optional[str]:
-    """The popup checkout's commit (and ``+dirty`` with uncommitted changes), if it is a git checkout."""
+    """The popup checkout's commit (and ``+dirty`` with uncommitted changes), if it is a git
+    checkout; else ``$POPUP_BENCH_COMMIT`` (a snapshot made with ``git archive``)."""
+    if os.environ.get("POPUP_BENCH_COMMIT"):
+        return os.environ["POPUP_BENCH_COMMIT"]
     root = Path(__file__).resolve().parents[1]
     try:
         c = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10).stdout.strip()

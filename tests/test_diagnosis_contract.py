@@ -352,7 +352,9 @@ def test_noise_floors_a_large_misfit_biased_are_re_estimated_as_the_model_improv
     off = dg._noise_recheck(cp)
     up = {c for c, r in off.items() if r > 1.5}
     assert len(up) >= 2 and up <= set(imu), off  # the coloured channels found back up
-    st = dg._step(cp, ["payload_mass"], {}, 1).in_floors(off)
+    st0 = dg._step(cp, ["payload_mass"], {}, 1)
+    assert not dg._at_floor(st0, cp)  # in the first floors the truth is not at its floor: the loop would go on
+    st = st0.in_floors(off)
     assert st.error < 0.3 and max(st.channel_error.values()) < 1.2, st.channel_error
     # floors estimated from the right model: nothing to re-estimate
     pt = ReplayProblem(truth, run, threads=0)
@@ -366,8 +368,17 @@ def test_noise_floors_a_large_misfit_biased_are_re_estimated_as_the_model_improv
     for c in up:
         assert h.noise_initial[c] < 0.5 * true[c] and h.noise[c] == pytest.approx(true[c], rel=0.2), (c, h.noise[c], true[c])
     assert h.notes and h.notes[-1].startswith("round 1: the noise floors re-estimated from the residual of the model with payload_mass")
-    assert "every error here is in noise floors re-estimated on the refitted model" in h.conclusion
+    assert "the history's errors are in noise floors re-estimated on a refitted model" in h.conclusion
     assert "what is left is at the noise floor" in h.conclusion and "not explained by the library" not in h.conclusion
     js = h.to_dict()
     c = sorted(up)[0]
     assert js["noise"][c] == pytest.approx(h.noise[c]) and js["noise_initial"][c] == pytest.approx(h.noise_initial[c])
+    # every step is in the final floors: the nominal step rescaled from the first floors
+    from popup.unseen import fit_unseen_motion
+
+    per0 = fit_unseen_motion(p0).error()[1]
+    for ch in per0:
+        assert h.steps[0].channel_error[ch] == pytest.approx(per0[ch] * h.noise_initial[ch] / h.noise[ch], rel=1e-9)
+    assert js["nominal_error"] == pytest.approx(h.steps[0].error)
+    assert js["channels"][c]["encoder_floor"] == pytest.approx(h.problem.encoder_floor[c])
+    assert js["rounds"][0]["noise"][c] == pytest.approx(h.noise_initial[c])  # a round keeps the floors it was computed in

@@ -97,8 +97,8 @@ tried and why it was or was not kept is in ``History.notes``. Each history step 
 ``round``.
 
 **Floors re-estimated.** The floors σ_c come from the nominal residual, whose misfit biases
-the estimator (a rough misfit up; a coloured noise hidden, down). After each step that adds
-or swaps in an effect they are estimated again from the refitted model's residual; a
+the estimator (a rough misfit up; a coloured noise hidden, down). After each step (an effect
+added, removed or swapped in) they are estimated again from the refitted model's residual; a
 channel whose floor moves by more than :data:`NOISE_RECHECK` takes the new one, and the
 history, the later rounds and the conclusion are in it (``History.noise``,
 ``History.noise_initial``).
@@ -578,8 +578,9 @@ class HistoryStep:
         its multiples are in (channels not named keep theirs)."""
         per = {c: v / ratio.get(c, 1.0) for c, v in self.channel_error.items()}
         val = {c: v / ratio.get(c, 1.0) for c, v in self.validation_channel_error.items()}
-        return replace(self, channel_error=per, error=_systematic_of(per),
-                       validation_channel_error=val, validation_error=_systematic_of(val) if val else self.validation_error)
+        moved = any(r != 1.0 for r in ratio.values())
+        return replace(self, channel_error=per, error=_systematic_of(per), validation_channel_error=val,
+                       validation_error=_systematic_of(val) if val else (math.nan if moved else self.validation_error))
 
 
 @dataclass
@@ -625,14 +626,35 @@ class History:
     noise_initial: Dict[str, float] = field(default_factory=dict)
     """The floors σ per channel first estimated, from the residual of the model as given
     (``noise`` holds those every step is in: re-estimated as the model improved)."""
-    encoder_floor: Dict[str, float] = field(default_factory=dict)
-    """Per channel, the replay error the encoder's own error causes as a multiple of the
-    floor in ``noise`` (:attr:`ReplayProblem.encoder_floor`; empty: the first diagnosis's)."""
+    problem: Any = field(default=None, repr=False)
+    """The run's :class:`ReplayProblem` of the model as given, in the floors of ``noise``
+    (``None``: the first diagnosis's is used)."""
 
     @property
     def complete(self) -> bool:
         """Whether every round finished (no ``error``)."""
         return not self.error
+
+    def _floors_problem(self) -> Optional[ReplayProblem]:
+        if self.problem is not None:
+            return self.problem
+        return self.diagnoses[0].problem if self.diagnoses else None
+
+    @property
+    def encoder_floor(self) -> Dict[str, float]:
+        """Per channel, the replay error the encoder's own error causes as a multiple of the
+        floor in ``noise`` (:attr:`ReplayProblem.encoder_floor`; 1 = nothing)."""
+        p = self._floors_problem()
+        try:
+            return dict(p.encoder_floor) if p is not None else {}
+        except Exception:  # noqa: BLE001 - a failed run's history still goes out
+            return {}
+
+    @property
+    def at_floor(self) -> List[str]:
+        """Channels whose measured signal is at its noise floor in ``noise`` (std < 1.5 σ)."""
+        p = self._floors_problem()
+        return list(p.at_floor) if p is not None else []
 
     @property
     def model(self) -> Any:
@@ -673,11 +695,13 @@ class History:
         as first estimated, before the loop re-estimated any), ``complete`` and, when a round failed,
         ``error``."""
         first = self.diagnoses[0] if self.diagnoses else None
-        floor = first.at_floor if first else []
+        floor = self.at_floor
+        enc = self.encoder_floor
         spikes: Dict[str, Dict[str, Any]] = {}
-        if first is not None and first.problem is not None:
+        fp = self._floors_problem()
+        if fp is not None:
             try:
-                spikes = first.problem.spikes()
+                spikes = fp.spikes()
             except Exception:  # noqa: BLE001 - the numbers still go out
                 spikes = {}
         out: Dict[str, Any] = {
@@ -692,7 +716,7 @@ class History:
                     "noise_multiple_nominal": _num(self.steps[0].channel_error.get(c)),
                     "noise_multiple_final": _num(self.steps[-1].channel_error.get(c)),
                     "at_noise_floor": c in floor,
-                    "encoder_floor": _num((self.encoder_floor or (first.encoder_floor if first else {})).get(c, 1.0)),
+                    "encoder_floor": _num(enc.get(c, 1.0)),
                     "spikes": spikes.get(c, {}).get("count", 0),
                     "spike_times": spikes.get(c, {}).get("times", []),
                     "spike_share": _num(spikes.get(c, {}).get("share", 0.0)),
@@ -1374,6 +1398,7 @@ def improve(
                         current, cprob, ci = _refit_stable(cprob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
                         cprob = fit_unseen_motion(cprob)
                         steps.append(_step(cprob, added, ci, rnd, removed=e))
+                        prob, cprob, steps = _floors_update(prob, cprob, steps, notes, rnd)
                 # swap step: an effect added earlier may have stood in for two (the greedy
                 # first round picks one effect for the error of both); it is tried replaced
                 # by the best candidate for the model without it, kept when the likelihood
@@ -1416,7 +1441,7 @@ def improve(
     except Exception as e:  # noqa: BLE001 - nothing lost: the rounds before are returned
         error = f"round {rnd + 1} failed: {type(e).__name__}: {e}"
     h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise, notes=notes, noise_initial=noise0,
-                encoder_floor=_safe_encoder_floor(prob))
+                problem=prob)
     h.conclusion = _conclude(h, max_rounds, prob)
     h.seconds = time.perf_counter() - t_start
     return h
@@ -1446,7 +1471,8 @@ def _noise_recheck(cprob: ReplayProblem) -> Dict[str, float]:
 
 def _floors_update(prob: ReplayProblem, cprob: ReplayProblem, steps: List[HistoryStep], notes: List[str],
                    rnd: int) -> Tuple[ReplayProblem, ReplayProblem, List[HistoryStep]]:
-    """The loop's noise floors re-estimated on the model of ``cprob`` (the last step's):
+    """The loop's noise floors re-estimated on the model of ``cprob`` (the last step's: an
+    effect added, removed or swapped in):
     where a channel's differs by more than :data:`NOISE_RECHECK` (:func:`_noise_recheck`),
     the base problem ``prob`` and ``cprob`` take the new floors, every step so far is put
     in them (one scale, so the fall of the error stays comparable) and a line goes to
@@ -1454,14 +1480,18 @@ def _floors_update(prob: ReplayProblem, cprob: ReplayProblem, steps: List[Histor
     off = _noise_recheck(cprob)
     if not off:
         return prob, cprob, steps
-    new = {c: cprob.noise[c] * r for c, r in off.items()}
     last = steps[-1]
-    moved = steps[:-1] + [last.in_floors(off)]
+    try:
+        new = {c: cprob.noise[c] * r for c, r in off.items()}
+        out = prob.with_noise(new), cprob.with_noise(new), [st.in_floors(off) for st in steps]
+    except Exception as ex:  # noqa: BLE001 - a check: the loop goes on in the floors it had
+        notes.append(f"round {rnd}: re-estimating the noise floors failed ({type(ex).__name__}: {ex}); the floors used stand")
+        return prob, cprob, steps
     txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(off.items(), key=lambda kv: -abs(math.log(kv[1]))))
     notes.append(f"round {rnd}: the noise floors re-estimated from the residual of the model with {' + '.join(last.effects) or 'nothing'} "
                  f"differ from those used (a larger misfit biases the estimator: up, or down where it hides a coloured noise): {txt}; "
-                 f"every step is now in the new floors (that model's systematic error {last.error:.3g} → {moved[-1].error:.3g} noise units)")
-    return prob.with_noise(new), cprob.with_noise(new), [st.in_floors(off) for st in steps]
+                 f"every step is now in the new floors (that model's systematic error {last.error:.3g} → {out[2][-1].error:.3g} noise units)")
+    return out
 
 
 def _n_params(fitted: Mapping[str, Sequence[str]], flat: np.ndarray) -> int:
@@ -1555,15 +1585,6 @@ def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept
         _note(log, f"{what}: failed ({type(ex).__name__}: {ex}); the model stands")
         return None
     return s.effect, m2, p2, ci2, nf, d
-
-
-def _safe_encoder_floor(prob: ReplayProblem) -> Dict[str, float]:
-    """:attr:`ReplayProblem.encoder_floor`, or ``{}`` where it cannot be computed (the
-    history still goes out)."""
-    try:
-        return dict(prob.encoder_floor)
-    except Exception:  # noqa: BLE001 - a failed round's history is returned whatever
-        return {}
 
 
 def _systematic_of(per: Mapping[str, float]) -> float:
@@ -1742,7 +1763,8 @@ def _conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None)
         if st.removed and st.swapped_in:
             e = st.swapped_in
             ptxt = _fmt_params({k: v for k, v in st.params.get(e, {}).items() if k in st.ci95.get(e, {})}, st.ci95.get(e, {})) or _fmt_params(st.params.get(e, {}), {})
-            parts.append(f"replaced {st.removed} by {e} ({ptxt}): {st.removed} stood in for it; the error fell from {prev.error:.3g} to {st.error:.3g} noise units")
+            parts.append(f"replaced {st.removed} by {e} ({ptxt}): {st.removed} stood in for it; the error "
+                         f"{'fell' if st.error < prev.error else 'went'} from {prev.error:.3g} to {st.error:.3g} noise units")
             continue
         if st.removed:
             parts.append(f"removed {st.removed} again (with {', '.join(st.effects)} refitted it explains nothing more; error {prev.error:.3g} → {st.error:.3g})")
@@ -1756,13 +1778,17 @@ def _conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None)
                        key=lambda x: -(x[1] - x[2]) if math.isfinite(x[1] - x[2]) else 0.0)[:3]
         ch = ", ".join(f"{c} {a:.2g}× → {b:.2g}× noise" for c, a, b in moved if a - b > 0.05 * a)
         reset = f", with {st.law_reset} back at its base law (its richer variant had stood in for {e})" if st.law_reset else ""
-        parts.append(f"added {e} ({ptxt}){reset}: the systematic error fell from {prev.error:.3g} to {st.error:.3g} noise units ({100 * drop:.0f} % less)"
-                     + (f"; on {ch}" if ch else ""))
+        fall = (f"the systematic error fell from {prev.error:.3g} to {st.error:.3g} noise units ({100 * drop:.0f} % less)" if st.error < prev.error
+                else f"the systematic error went from {prev.error:.3g} to {st.error:.3g} noise units")
+        parts.append(f"added {e} ({ptxt}){reset}: {fall}" + (f"; on {ch}" if ch else ""))
     last = h.steps[-1]
     d_last = h.diagnoses[-1] if h.diagnoses and h.diagnoses[-1].problem is not None and h.diagnoses[-1].problem.model is last.model else None
     n_added = sum(1 for st in h.steps[1:] if not st.removed)
     prob0 = prob if prob is not None else h.diagnoses[0].problem if h.diagnoses and h.diagnoses[0].problem is not None else None
-    floor = prob0 is not None and _at_floor(last, prob0)
+    try:
+        floor = prob0 is not None and _at_floor(last, prob0)
+    except Exception:  # noqa: BLE001 - the words still go out: not shown to be at the floor
+        floor = False
     if last.error <= AT_FLOOR or floor:
         if last.error <= AT_FLOOR:
             what = f"the noise floor (systematic error {last.error:.3g} noise units)"
@@ -1791,7 +1817,7 @@ def _conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None)
     floors_moved = {c: h.noise[c] / v for c, v in h.noise_initial.items() if v > 0 and c in h.noise and h.noise[c] != v}
     if floors_moved:
         txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(floors_moved.items(), key=lambda kv: -abs(math.log(kv[1]))))
-        parts.append(f"every error here is in noise floors re-estimated on the refitted model, the nominal residual's misfit having "
+        parts.append(f"the history's errors are in noise floors re-estimated on a refitted model, the nominal residual's misfit having "
                      f"biased them ({txt} the first estimate)")
     if h.error:
         parts.append(f"incomplete: {h.error}; the rounds before it are kept")
@@ -1886,13 +1912,15 @@ def cli_main(argv: Sequence[str]) -> int:
     print(f"run: {a.run}")
     print(f"error: {ERROR_DEFINITION}")
     print(f"nominal error: {h.steps[0].error:.4g} noise units")
-    floor = h.diagnoses[0].at_floor if h.diagnoses else []
+    floor = h.at_floor
     print("channels (noise σ, nominal → final noise multiple):")
     for c, v in h.steps[0].channel_error.items():
         print(f"  {c:<9} σ = {h.noise.get(c, math.nan):<10.3g} {v:8.3g}× → {h.steps[-1].channel_error.get(c, math.nan):.3g}×{'  (signal at the noise floor)' if c in floor else ''}")
     if h.diagnoses:
         d0 = h.diagnoses[0]
         print()
+        if h.noise_initial and h.noise_initial != h.noise:
+            print(f"first round (in the floors first estimated, nominal error {d0.nominal_error:.4g} in them; popup.History.noise_initial):")
         print(f"{'rank':>4}  {'effect':<22}{'sig':<5}{'score':>10}{'error after':>13}{'explained':>10}  parameters")
         for i, s in enumerate(d0.suspects, 1):
             score = f"{s.score:.1f}" if math.isfinite(s.score) else "n/a"

@@ -82,7 +82,8 @@ __all__ = [
 ERROR_DEFINITION = (
     "systematic error in units of the noise: S = sqrt(max(mean_c r_c^2 - 1, 0)) over the compared channels c, "
     "where r_c = RMSE_c/sigma_c is channel c's free-run replay error as a multiple of its white-noise floor sigma_c "
-    "(estimated from the data by 4th divided differences of the nominal residual); 0 = at the noise floor"
+    "(estimated from the data by 4th divided differences of the model's residual: the nominal one, re-estimated by popup.improve "
+    "on a refitted model where it differs by more than 1.2x); 0 = at the noise floor"
 )
 N_BLOCKS = 10
 """Equal time blocks the run is cut into for training/validation."""

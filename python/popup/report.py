@@ -64,10 +64,11 @@ def to_html(result: Union[History, Diagnosis], *, title: str = "popup diagnosis"
 
     fall = " → ".join(f"{s.error:.4g}" for s in h.steps)
     parts.append(f"<p><b>Systematic error</b> in noise units ({html.escape(ERROR_DEFINITION)}): {fall}</p>")
+    enc, floor = h.encoder_floor, h.at_floor
     rows = "".join(
         f"<tr><td>{html.escape(c)}</td><td>{h.noise.get(c, float('nan')):.4g}</td><td>{v:.3g}×</td><td>{h.steps[-1].channel_error.get(c, float('nan')):.3g}×</td>"
-        f"<td>{h.diagnoses[0].encoder_floor.get(c, 1.0) if h.diagnoses else 1.0:.3g}×</td>"
-        f"<td>{'yes' if h.diagnoses and c in h.diagnoses[0].at_floor else ''}</td></tr>"
+        f"<td>{enc.get(c, 1.0):.3g}×</td>"
+        f"<td>{'yes' if c in floor else ''}</td></tr>"
         for c, v in h.steps[0].channel_error.items()
     )
     parts.append("<table><tr><th>channel</th><th>noise σ</th><th>nominal (× noise)</th><th>final (× noise)</th>"
