@@ -284,6 +284,29 @@ def test_the_cheap_screen_fully_fits_only_its_best_and_still_finds_the_effect(no
     assert not any("screened" in s.message for s in plain.suspects)
 
 
+def test_a_candidate_refitted_with_the_added_effects_applies_them_as_refitted(nominal, tmp_path):
+    """From round 2 a candidate is refitted jointly with the effects already added; its
+    ``error_after`` is that joint fit's, so ``Suspect.apply`` sets the added effects at their
+    refitted values too. Before, only the candidate's own values were set: the loop's refit
+    started from the added effects at their old values and could end above the model it
+    had before the addition (a MuJoCo friction run: 0.527 → 0.698 after a sensor delay whose
+    joint fit had predicted 0.404, then a pressure leak added to win the difference back)."""
+    t, q = popup.synth.lab_trajectory(6.0, rate=250.0, seed=21)
+    truth = nominal.with_effect("payload_mass", delta_kg=0.3).with_effect("joint_friction", tau_c=[1.0, 1.5, 0.5], b=[0.2, 0.2, 0.1])
+    run = popup.synth.measured_run(truth, t, q, tmp_path, seed=21)
+    current = nominal.with_effect("payload_mass", delta_kg=0.2)  # an earlier round's fit, biased by the missing friction
+    d = dg.diagnose(current, run, effects=["joint_friction"], refit={"payload_mass": ["delta_kg"]})
+    s = d["joint_friction"]
+    assert s.significant and "refitted with payload_mass" in s.message, s.message
+    assert s.refitted["payload_mass"]["delta_kg"][0] == pytest.approx(0.3, abs=0.01), s.refitted
+    err, _ = dg.model_error(s.apply(current), run, problem=d.problem)
+    assert err == pytest.approx(s.error_after, rel=1e-6, abs=1e-9)
+    # the candidate's values alone leave the payload where it was: a worse model
+    alone = current.with_effect("joint_friction", **s.params)
+    assert dg.model_error(alone, run, problem=d.problem)[0] > 2 * s.error_after + 0.5
+    assert s.to_dict()["refitted"]["payload_mass"]["delta_kg"] == s.refitted["payload_mass"]["delta_kg"]
+
+
 def test_the_swap_offers_only_candidates_some_round_found_significant(nominal, tmp_path, monkeypatch):
     """The loop's swap step (an effect added earlier replaced by another) offers only the
     candidates that some round's diagnosis found significant, each (effect, candidate)

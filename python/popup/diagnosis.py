@@ -297,6 +297,10 @@ class Suspect:
         ``rank``, ``condition``, ``correlated``, ``at_bound``, ``unidentifiable``, ``text``.
     dt : float
         The step [s] the candidate ran at.
+    refitted : dict
+        The effects already in the model that were refitted jointly with it (round 2 on):
+        ``{effect: {name: [values]}}`` at this fit; :meth:`apply` sets them too, so the
+        model it gives is the one ``error_after`` is of.
     """
 
     effect: str
@@ -320,6 +324,7 @@ class Suspect:
     identifiability: Dict[str, Any] = field(default_factory=dict)
     dt: float = math.nan
     fitted: List[str] = field(default_factory=list)
+    refitted: Dict[str, Dict[str, List[float]]] = field(default_factory=dict)
 
     @property
     def relative_drop(self) -> float:
@@ -333,9 +338,10 @@ class Suspect:
         return _fmt_params({k: v for k, v in self.params.items() if k in self.ci95}, self.ci95)
 
     def apply(self, model: "Model") -> "Model":
-        """``model`` with this effect switched on at its fitted values (and the smaller
-        step the candidate needed, if it did)."""
-        m = model.with_effect(self.effect, **self.params)
+        """``model`` with this effect switched on at its fitted values, the effects refitted
+        jointly with it at theirs (:attr:`refitted`), and the smaller step the candidate
+        needed, if it did."""
+        m = model.with_effects({**self.refitted, self.effect: self.params}) if self.refitted else model.with_effect(self.effect, **self.params)
         if math.isfinite(self.dt) and self.dt < m.dt * (1 - 1e-12):
             m = m.with_dt(self.dt)
         return m
@@ -357,6 +363,7 @@ class Suspect:
             "channel_error_after": {k: _num(v) for k, v in self.channel_error_after.items()},
             "validation": {"error_before": _num(self.validation_before), "error_after": _num(self.validation_after), "lr": _num(self.validation_lr)},
             "identifiability": _jsonable(self.identifiability),
+            "refitted": {e: {k: [_num(x) for x in v] for k, v in p.items()} for e, p in self.refitted.items()},
             "evidence": {k: (_num(v) if isinstance(v, float) else v) for k, v in self.evidence.items()},
             "n_eff": _num(self.n_eff),
             "dt": _num(self.dt),
@@ -902,6 +909,7 @@ class _Fitted:
             message="; ".join(m for m in (self.unresolved, "not checked on the held-out samples: it does not act there" if self.silent else "", message) if m),
             validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant,
             identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free if p.effect == self.name}),
+            refitted={e: est.params_dict(e, self.out.flat) for e in sorted({p.effect for p, _ in self.free if p.effect != self.name})},
         )
 
 
