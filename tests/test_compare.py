@@ -161,6 +161,9 @@ def test_channels_and_errors(truth, sim_df, tmp_path, clean_run):
     assert any("spline" in n for n in c.notes)
     with pytest.raises(popup.MeasuredRunError, match="cannot compare"):
         pc.compare(truth, clean_run, channels=["d11"])
+    # a channel named twice is refused by name (found by the fuzz test: a pandas error before)
+    with pytest.raises(popup.InputError, match=r"\['ee_z'\] named more than once"):
+        pc.compare(truth, clean_run, channels=["ee_z", "dq1", "ee_z"])
     # no comparable channel: only the encoder
     only_q = sim_df[["t", "q1", "q2", "q3", "p1", "p2"]].copy()
     only_q.attrs = dict(sim_df.attrs)

@@ -131,6 +131,9 @@ def select_channels(run: MeasuredRun, channels: Optional[Sequence[str]], where: 
             )
         if not chans:
             raise MeasuredRunError(f"{where}: channels=[] selects nothing to compare; comparable: {have}")
+        twice = sorted({c for c in chans if chans.count(c) > 1})
+        if twice:
+            raise InputError(f"input channels: {twice} named more than once in {chans}; name each channel once")
         for c in chans:
             if closed:
                 continue
