@@ -1294,7 +1294,12 @@ def calibrate_near(spec: RunSpec, exc: Excitation) -> None:
 
     def sigma(p: Mapping[str, Any]) -> float:
         pp = {k: v for k, v in p.items() if k in popup.effects.EFFECTS[name].params}
-        r1 = nom.with_effects({name: _popup_effects({"x": pp})["x"]}).replay(tf, qf, sample_rate=500)
+        m1 = nom.with_effects({name: _popup_effects({"x": pp})["x"]})
+        # a stiff structural mode (torsion) needs a smaller step than the nominal's 1 ms
+        sdt = m1.with_dt(1.0).stable_dt([float(x) for x in m1.rest_state()], replay=True)
+        if 0.8 * sdt < m1.dt:
+            m1 = m1.with_dt(2e-3 / math.ceil(2e-3 / (0.8 * sdt)))  # a divisor of the 2 ms sample period
+        r1 = m1.replay(tf, qf, sample_rate=500)
         best = 0.0
         for g in present:
             e = np.concatenate([np.asarray(r1.channel(c)) - np.asarray(r0.channel(c)) for c in groups[g]])
