@@ -89,6 +89,34 @@ def test_coloured_noise_of_a_sensor_low_pass_is_found(rate):
     assert np.all(plain < 0.75), plain
 
 
+@pytest.mark.parametrize("rate", [100.0, 200.0, 500.0])
+def test_noise_coloured_near_the_nyquist_frequency_is_found(rate):
+    """A low-pass just below the Nyquist frequency (a sensor's anti-alias or digital
+    low-pass; 1-pole bilinear at 0.8-0.92 × Nyquist, with its zero at Nyquist) takes out what
+    neighbouring-sample differences weigh most: stride 1 alone reads 0.7-0.9 × σ and a
+    clean replay would look 10-40 % above its floor. The estimate grows once, then is flat
+    (a plateau from stride 2 on), and that plateau is taken: within 10 % of σ (the band
+    between its zero and the rest is slightly above σ); on the model residual of a slow
+    systematic error too. 12-20 s runs."""
+    from scipy.signal import butter, lfilter
+
+    rng = np.random.default_rng(int(rate) + 29)
+    found, plain = [], []
+    for k in range(12):
+        n = int(rng.uniform(12.0, 20.0) * rate)
+        t = np.arange(n) / rate
+        b, a = butter(1, float(rng.uniform(0.8, 0.92)))
+        e = lfilter(b, a, rng.normal(size=n + 2000))[2000:]
+        sigma = 10 ** rng.uniform(-3, 0)
+        e *= sigma / e.std()
+        y = sigma * rng.uniform(0.0, 5.0) * _signal(t, rng, fmax=2.0) / 3.0 + e
+        found.append(noise_std(t, y, correlation_s=0.05) / sigma)
+        plain.append(noise_std(t, y) / sigma)
+    found, plain = np.array(found), np.array(plain)
+    assert np.all((found > 0.9) & (found < 1.1)), found
+    assert np.all(plain < 0.9), plain
+
+
 @pytest.mark.parametrize("rate", [200.0, 500.0, 1000.0])
 def test_stride_search_leaves_white_noise_and_fast_systematic_errors_alone(rate):
     rng = np.random.default_rng(int(rate) + 12)

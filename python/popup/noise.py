@@ -20,6 +20,10 @@ high-frequency content is what neighbouring samples see. With ``correlation_s`` 
 differences are also taken over samples 2, 4, 8 … apart until the estimate stops growing
 (the noise decorrelates over the stride; a smooth systematic error leaks only as
 (ω·stride·h)⁴), which recovers a 1-pole low-pass noise at 20–100 Hz within ~20 % on a model residual.
+A low-pass just below the Nyquist frequency leaves nothing correlated over a few samples
+but takes out the band stride-1 differences weigh most (0.8–0.9 × σ at 0.9–0.95 ×
+Nyquist): a first growth significant against white noise's own scatter followed by a
+plateau from stride 2 on is taken as that, and the stride-2 value is σ.
 """
 
 from __future__ import annotations
@@ -43,6 +47,12 @@ _PLATEAU = 1.1
 _NEAR_PLATEAU = 1.3
 #: first growth of noise coloured by a low-pass below 0.3 × the rate (≥ 2.4 seen)
 _COLOURED = 1.5
+#: standard deviation × √n of ln(stride-2 / stride-1 estimate) on white noise of n samples
+#: (from the 4th difference's autocorrelation: 2 × 1.15; 1.55 measured)
+_WHITE_SCATTER = 1.6
+#: a first growth this many of those standard deviations above 1, followed by a plateau,
+#: is noise coloured at the sample scale (white noise: both strides unbiased)
+_SAMPLE_COLOUR_SD = 3.0
 
 
 def _terms(t: np.ndarray, y: np.ndarray, k: int, max_gap: float, med: float) -> np.ndarray:
@@ -122,6 +132,13 @@ def noise_std(t: Any, y: Any, *, order: int = DIFFERENCE_ORDER, max_gap: float =
         if not (math.isfinite(nxt) and nxt > 0):
             break
         seq.append(nxt)
+    sig = math.exp(_SAMPLE_COLOUR_SD * _WHITE_SCATTER / math.sqrt(t.size))
+    if len(seq) > 2 and sig < seq[1] / seq[0] < _COLOURED and seq[2] / seq[1] <= _PLATEAU:
+        # a significant first growth, then a plateau from stride 2 on: noise coloured at the
+        # sample scale (a low-pass near the Nyquist frequency, whose zero there the stride-1
+        # differences weigh most: 0.83-0.91 × σ at 0.9-0.95 × Nyquist); a smooth systematic
+        # error would have grown faster at the next stride instead (×16 per stride)
+        return seq[1]
     growth, last = math.inf, 0
     for i in range(1, len(seq)):
         g = seq[i] / seq[i - 1]
