@@ -356,7 +356,9 @@ class ReplayProblem:
             self.iq, self.iv = p.iq, p.iv
             self.task, self.q0, self.t0, self.duration = p.task, p.q0, p.t0, p.duration
             self.sigma = p.sigma
-            self._enc = p._enc  # the encoder's error is the run's: shared with every derived problem
+            # the encoder's error is the run's, its replay error the model's: shared with every
+            # derived problem until :meth:`with_encoder_sigma` puts another model's in
+            self._enc = p._enc
             self.q_base, self.q_corr, self.compliance = p.q_base, p.q_corr, p.compliance
             self._nominal = None
             return
@@ -526,8 +528,22 @@ class ReplayProblem:
         a reference replay or an encoder replayed as measured."""
         e = self._enc[0]
         if e is None:
-            e = self._enc[0] = self._encoder_bootstrap()
+            e = self._enc[0] = self.encoder_bootstrap()
         return e
+
+    def with_encoder_sigma(self, sigma: Any) -> "ReplayProblem":
+        """The same problem with the encoder's replay error :attr:`encoder_sigma` replaced by
+        ``sigma`` (C,) [channel unit] (e.g. :meth:`encoder_bootstrap` of a refitted model:
+        a model whose output is more sensitive to the angles, such as a gear with play
+        whose impacts the motor's timing sets, has a higher encoder floor); its simulation
+        is not rerun."""
+        e = np.asarray(sigma, dtype=np.float64)
+        if e.shape != (len(self.channels),) or not np.all(np.isfinite(e)) or np.any(e < 0):
+            raise InputError(f"with_encoder_sigma: sigma must be {len(self.channels)} finite values ≥ 0 (one per channel {self.channels}), got {e.tolist()}")
+        p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
+        p._enc = [e]
+        p._nominal = self._nominal
+        return p
 
     @property
     def encoder_width(self) -> np.ndarray:
@@ -568,7 +584,11 @@ class ReplayProblem:
             return math.inf
         return systematic(np.square(np.asarray(fm)))
 
-    def _encoder_bootstrap(self) -> np.ndarray:
+    def encoder_bootstrap(self) -> np.ndarray:
+        """(C,) std [channel unit] of the replay error the encoder's own error causes with
+        this problem's model (module docs: parametric bootstrap, :data:`ENCODER_DRAWS`
+        replays with a fixed seed), computed afresh (:attr:`encoder_sigma` is the first
+        model's unless :meth:`with_encoder_sigma` set another)."""
         C = len(self.channels)
         sm = self.smoothing
         if self.closed or sm is None or not any(v is not None for v in sm.params.get("lam", [None] * 3)):
