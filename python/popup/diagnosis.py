@@ -615,7 +615,8 @@ class History:
         What the swap and base-law steps tried (the effect, the candidates), and why each
         was kept or not (its BIC gain and held-out error, no candidate significant, or the
         failure that left the model as it was); and where a refitted model's residual gave
-        some channel's noise floor anew (:data:`NOISE_RECHECK`).
+        some channel's noise floor anew (:data:`NOISE_RECHECK`) or its encoder floor
+        (:data:`ENCODER_NOTE`).
     noise : dict
         The noise floor σ per channel (channel unit) every step's error is in: first
         estimated from the residual of the model as given, then re-estimated from each
@@ -649,7 +650,8 @@ class History:
 
     @property
     def encoder_floor(self) -> Dict[str, float]:
-        """Per channel, the replay error the encoder's own error causes as a multiple of the
+        """Per channel, the replay error the encoder's own error causes with the last
+        model of the loop (bootstrapped again on each refitted model), as a multiple of the
         floor in ``noise`` (:attr:`ReplayProblem.encoder_floor`; 1 = nothing)."""
         p = self._floors_problem()
         try:
