@@ -512,6 +512,27 @@ def test_the_loop_judges_a_model_against_its_own_encoder_floor(tmp_path):
     assert any("encoder floor bootstrapped again on the model with backlash" in n for n in h.notes), h.notes
 
 
+def test_variants_of_one_effect_are_combined_where_the_truth_has_both(tmp_path):
+    """A link of 3 segments whose root spring is stiffer (popup's engine, 1000 Hz multisine)
+    is neither the "3 segments" variant nor the "stiffer root" one: each alone leaves
+    hundreds of noise units on the training samples' likelihood. The preferred variant is
+    tried with each other significant one added; both together land on the truth."""
+    import dataclasses
+
+    sp = F.family_specs("higher_bending_modes", "popup", 4, 157, duration=6.0)[0]
+    truth = {"segments": [3.0, 3.0], "k_scale": [0.9, 1.1], "root_ratio": [3.5, 3.5]}
+    sp = dataclasses.replace(sp, effects={"higher_bending_modes": truth})
+    path, _ = F.make_run(sp, tmp_path)
+    run = _read(path)
+    d = popup.diagnose(run.model(), run, effects=["higher_bending_modes"], threads=1)
+    s = d.suspects[0]
+    assert s.significant and "+ 3 segments preferred" in s.message, s.message
+    assert s.params["segments"] == [3.0, 3.0], s.params
+    assert np.allclose(s.params["k_scale"], truth["k_scale"], rtol=0.02), s.params
+    assert np.allclose(s.params["root_ratio"], truth["root_ratio"], rtol=0.05), s.params
+    assert s.error_after < 0.3, s.error_after
+
+
 def _quiet_mujoco_nominal(n, seed, i, bits, tmp_path):
     """Run ``i`` of a MuJoCo nominal family (``n`` runs, ``seed``): ``bits``-bit encoders, quiet sensors."""
     pytest.importorskip("mujoco")
