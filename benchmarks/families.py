@@ -1239,7 +1239,11 @@ def effect_size(clean: Mapping[str, np.ndarray], spec: RunSpec) -> Dict[str, flo
     t = np.asarray(clean["t"])
     q = np.stack([clean[f"q{j}"] for j in (1, 2, 3)], axis=1)
     nom = popup.Model("popup-lab", payload_kg=spec.payload_kg, pressure_pa=spec.pressure_pa)
+    # the replay's output rate must divide popup's 1 kHz: the run's own rate where it does,
+    # else 1 kHz (e.g. 333 Hz), splined onto the run's stamps
     rate = min(1000.0, float(spec.rate))
+    if abs(1000.0 / rate - round(1000.0 / rate)) > 1e-9:
+        rate = 1000.0
     tt = np.arange(0.0, float(t[-1]) + 1e-9, 1.0 / rate)
     uniform = len(tt) == len(t) and float(np.abs(tt - t).max()) < 1e-9
     r = nom.replay(tt, q if uniform else CubicSpline(t, q)(tt), sample_rate=rate)
