@@ -63,27 +63,35 @@ def test_sparse_jumps_do_not_inflate_the_floor():
     assert noise_std(t, y, robust=False) > 1.5 * 0.05
 
 
+def _estimate_low_passed(rng, t, wn, max_sys, fmax, found, plain):
+    """White noise through a 1-pole low-pass at ``wn`` × Nyquist, scaled to a random σ, plus
+    a systematic error of up to ``max_sys`` σ below ``fmax`` [Hz]: the estimate with the
+    stride search and the plain one, as multiples of σ, appended to ``found``/``plain``."""
+    from scipy.signal import butter, lfilter
+
+    n = t.size
+    b, a = butter(1, wn)
+    e = lfilter(b, a, rng.normal(size=n + 2000))[2000:]
+    sigma = 10 ** rng.uniform(-3, 0)
+    e *= sigma / e.std()
+    y = sigma * rng.uniform(0.0, max_sys) * _signal(t, rng, fmax=fmax) / 3.0 + e
+    found.append(noise_std(t, y, correlation_s=0.05) / sigma)
+    plain.append(noise_std(t, y) / sigma)
+
+
 @pytest.mark.parametrize("rate", [200.0, 500.0, 1000.0])
 def test_coloured_noise_of_a_sensor_low_pass_is_found(rate):
     """A sensor's own 1-pole low-pass (20-100 Hz, below Nyquist) colours its noise: the
     neighbouring-sample estimate sees a fraction of it, the stride search the whole (on a
     model's residual: noise plus a slow systematic error)."""
-    from scipy.signal import butter, lfilter
-
     rng = np.random.default_rng(int(rate) + 11)
     found, plain = [], []
     for k in range(12):
         n = int(20 * rate)
         t = np.arange(n) / rate
         fc = float(rng.uniform(20.0, min(100.0, 0.3 * rate)))
-        b, a = butter(1, fc / (rate / 2))
-        e = lfilter(b, a, rng.normal(size=n + 2000))[2000:]
-        sigma = 10 ** rng.uniform(-3, 0)
-        e *= sigma / e.std()
         # a model's residual: a systematic error of up to 20 noise sigmas at 0.1-5 Hz
-        y = sigma * rng.uniform(0.0, 20.0) * _signal(t, rng, fmax=5.0) / 3.0 + e
-        found.append(noise_std(t, y, correlation_s=0.05) / sigma)
-        plain.append(noise_std(t, y) / sigma)
+        _estimate_low_passed(rng, t, fc / (rate / 2), 20.0, 5.0, found, plain)
     found, plain = np.array(found), np.array(plain)
     assert np.all((found > 0.8) & (found < 1.25)), found
     assert np.all(plain < 0.75), plain
@@ -98,20 +106,12 @@ def test_noise_coloured_near_the_nyquist_frequency_is_found(rate):
     (a plateau from stride 2 on), and that plateau is taken: within 10 % of σ (the band
     between its zero and the rest is slightly above σ); on the model residual of a slow
     systematic error too. 12-20 s runs."""
-    from scipy.signal import butter, lfilter
-
     rng = np.random.default_rng(int(rate) + 29)
     found, plain = [], []
     for k in range(12):
         n = int(rng.uniform(12.0, 20.0) * rate)
         t = np.arange(n) / rate
-        b, a = butter(1, float(rng.uniform(0.8, 0.92)))
-        e = lfilter(b, a, rng.normal(size=n + 2000))[2000:]
-        sigma = 10 ** rng.uniform(-3, 0)
-        e *= sigma / e.std()
-        y = sigma * rng.uniform(0.0, 5.0) * _signal(t, rng, fmax=2.0) / 3.0 + e
-        found.append(noise_std(t, y, correlation_s=0.05) / sigma)
-        plain.append(noise_std(t, y) / sigma)
+        _estimate_low_passed(rng, t, float(rng.uniform(0.8, 0.92)), 5.0, 2.0, found, plain)
     found, plain = np.array(found), np.array(plain)
     assert np.all((found > 0.9) & (found < 1.1)), found
     assert np.all(plain < 0.9), plain
