@@ -1058,9 +1058,9 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
 
 
 def _combined(a: Mapping[str, Any], b: Mapping[str, Any]) -> Optional[Dict[str, Any]]:
-    """Variants ``a`` and ``b`` of one effect together (structures merged, extras joined),
-    or ``None`` where they cannot be (another law; structures on the same parameter) or
-    where a variant of :data:`VARIANTS` already is that combination."""
+    """Variants ``a`` and ``b`` of one effect together (structures merged, extras joined;
+    named "a + b"), or ``None`` where they cannot be (another law; structures on the same
+    parameter)."""
     if a.get("alternative") or b.get("alternative"):
         return None
     sa, sb = dict(a.get("structure") or {}), dict(b.get("structure") or {})
