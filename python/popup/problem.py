@@ -28,6 +28,10 @@ What it holds (set up once, reused by every fit):
   the quantisation; smoothed again; replayed). A 12-bit encoder on a quiet IMU leaves
   the replay with the true model above the IMU's noise: that is a limit of the data, not
   a missing effect (``floor = sqrt(σ_c² + σ_enc,c²)``, :meth:`ReplayProblem.floor_multiples`).
+  It is the model's: computed with the first model that asks and shared with derived
+  problems; :meth:`ReplayProblem.encoder_bootstrap` computes it for another model and
+  :meth:`ReplayProblem.with_encoder_sigma` puts it in (the diagnosis loop does so on each
+  refitted model: a gear with play replays a coarse encoder far worse than the nominal).
 * **Unseen motion** (encoder replay, :mod:`popup.unseen`, used by the diagnosis): a servo's
   motion inside an encoder reading, fitted as a joint compliance bounded to a reading
   (:meth:`ReplayProblem.with_unseen_motion`, :attr:`ReplayProblem.compliance`; zeros and
@@ -524,7 +528,8 @@ class ReplayProblem:
     @property
     def encoder_sigma(self) -> np.ndarray:
         """(C,) std [channel unit] of the replay error that the encoder's own error causes
-        (module docs: parametric bootstrap; computed once per run, on first use); zeros for
+        (module docs: parametric bootstrap; computed on first use with this problem's model
+        and shared with the problems derived from it); zeros for
         a reference replay or an encoder replayed as measured."""
         e = self._enc[0]
         if e is None:
