@@ -334,9 +334,9 @@ def _commit() -> Optional[str]:
     return (c + ("+dirty" if dirty else "")) or None
 
 
-def pool(dirs: Sequence[str], engines: Sequence[str]) -> int:
-    """The tables over every result cached under ``dirs`` (``DIR/results/*.json``), each
-    re-classified from its stored output with this script's :func:`classify`."""
+def cached_rows(dirs: Sequence[str]) -> List[Dict[str, Any]]:
+    """Every result cached under ``dirs`` (``DIR/results/*.json``), each re-classified from
+    its stored output with this script's :func:`classify`."""
     rows: List[Dict[str, Any]] = []
     for d in dirs:
         files = sorted(Path(d).glob("results/*.json"))
@@ -350,6 +350,12 @@ def pool(dirs: Sequence[str], engines: Sequence[str]) -> int:
                 continue
             row["outcome"] = classify(row["truth"], {**row["diagnosis"], "json": row.get("json")})
             rows.append(row)
+    return rows
+
+
+def pool(dirs: Sequence[str], engines: Sequence[str]) -> int:
+    """The tables over every result cached under ``dirs`` (see :func:`cached_rows`)."""
+    rows = cached_rows(dirs)
     commits = sorted({str(r.get("commit") or "unrecorded") for r in rows})
     print(f"pooled {len(rows)} results from {len(dirs)} folder(s); popup commits: {', '.join(commits)}\n")
     for eng in engines:
@@ -372,7 +378,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per diagnosis (default 1800)")
     ap.add_argument("--resume", action="store_true", help="reuse runs and results already in --out")
     ap.add_argument("--generate-only", action="store_true", help="generate the runs, diagnose nothing")
-    ap.add_argument("--report-only", action="store_true", help="the tables from the results already in --out (runs without one are left out)")
+    ap.add_argument("--report-only", action="store_true", help="only the tables of the results cached in --out (nothing is generated or diagnosed; of the other arguments only --engine counts)")
     ap.add_argument("--styles", default=",".join(F.STYLES),
                     help=f"excitation styles cycled over the runs (comma-separated, of {', '.join(F.STYLES)}; default all)")
     ap.add_argument("--duration", type=float, default=None, help="every run this long [s] (default: drawn, 10-14 s)")
@@ -383,8 +389,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     if a.pool:
         return pool(a.pool, ["popup", "mujoco"] if a.engine == "both" else [a.engine])
-    if a.report_only:
-        a.resume = True
     engines = ["popup", "mujoco"] if a.engine == "both" else [a.engine]
     out = Path(a.out)
     (out / "results").mkdir(parents=True, exist_ok=True)
@@ -413,6 +417,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             if k not in ("nominal", "pairs", "disturbance", "backlash_held"):
                 ap.error(f"--kinds: {k!r} is not one of nominal, pairs, disturbance, backlash_held")
             plan.append((eng, k))
+
+    if a.report_only:
+        # the cache alone: nothing is generated or diagnosed, whatever the other arguments
+        rows = [r for r in cached_rows([a.out]) if r["truth"]["engine"] in engines]
+        print(f"report only: {len(rows)} cached result(s) in {out}\n")
+        return report(rows, engines, out, a)
 
     # ---- generate
     t0 = time.perf_counter()
@@ -456,32 +466,31 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return row
 
     rows: List[Dict[str, Any]] = []
-    if a.report_only:
-        have = [r for r in runs if (out / "results" / f"{r[0].name}.json").is_file()]
-        print(f"report only: {len(have)} of {len(runs)} runs have a result\n")
-        runs = have
     if a.jobs > 1:
         with ThreadPoolExecutor(max_workers=a.jobs) as ex:
             rows = list(ex.map(one, runs))
     else:
         rows = [one(r) for r in runs]
+    return report(rows, engines, out, a)
 
-    # ---- report
-    report: Dict[str, Any] = {"args": vars(a), "engines": {}, "runs": []}
+
+def report(rows: List[Dict[str, Any]], engines: Sequence[str], out: Path, a: argparse.Namespace) -> int:
+    """Print the tables of ``rows`` and write ``out/summary.json``."""
+    summary: Dict[str, Any] = {"args": vars(a), "engines": {}, "runs": []}
     print()
     for eng in engines:
         text, summ = table(rows, eng)
         print(text)
         print()
-        report["engines"][eng] = summ
+        summary["engines"][eng] = summ
     for r in rows:
         js = r.get("json") or {}
-        report["runs"].append({
+        summary["runs"].append({
             "run": r["run"], "truth": r["truth"], "rc": r["diagnosis"]["rc"], "seconds": r["diagnosis"]["seconds"],
             "failure": r["diagnosis"]["failure"], "outcome": r["outcome"], "truth_error": r.get("truth_error"),
             "suspects": [{k: s.get(k) for k in ("effect", "significant", "tested", "score", "error_after", "message")} for s in js.get("suspects", []) or [] if isinstance(s, dict)],
         })
-    (out / "summary.json").write_text(json.dumps(report, indent=1, default=str))
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
     print(f"summary: {out / 'summary.json'}")
     return 0
 

@@ -340,6 +340,20 @@ def test_benchmark_classifies_diagnosis_output():
     assert bench.classify(eff, {"rc": 0, "json": js, "failure": None})["ok"] is False
 
 
+def test_report_only_tables_the_cache_and_generates_nothing(tmp_path, capsys):
+    eff = {"kind": "effect", "family": "payload_mass", "hidden": ["payload_mass"], "engine": "mujoco", "style": "lab"}
+    js = _js([([], 10.0), (["payload_mass"], 0.2)], [("payload_mass", True)])
+    row = {"run": "r", "truth": eff, "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0}, "json": js}
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "mujoco-payload_mass-000.json").write_text(json.dumps(row))
+    # arguments that would generate a family: only the cache is read
+    assert bench.main(["--report-only", "--out", str(tmp_path), "--engine", "mujoco", "--n", "3", "--seed", "5"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results", "summary.json"]
+    summ = json.loads((tmp_path / "summary.json").read_text())
+    assert summ["engines"]["mujoco"]["counts"]["effect"]["ok"] == 1
+    assert "1 cached result" in capsys.readouterr().out
+
+
 def test_rate_bounds_are_exact_binomial_bounds_that_cover_at_their_level():
     # k = n and k = 0 have closed forms: lower = (1 - level)^(1/n), upper = 1 - (1 - level)^(1/n)
     for n in (1, 12, 59):
