@@ -672,6 +672,8 @@ class MujocoArm:
         bl = self.effects.get("backlash", {})
         gap = [float(x) for x in bl.get("gap", [0.0, 0.0, 0.0])]
         held = [bool(x) for x in bl.get("held", [0.0, 0.0, 0.0])]
+        # the gear contact: stiff (BACKLASH_K) unless the truth gives a compliant gear
+        self.gear_kd = (float(bl.get("gear_k", BACKLASH_K)), float(bl.get("gear_d", BACKLASH_D)))
         self.free_gap = [0.0 if h else g for g, h in zip(gap, held)]
         self.held_gap = [g if h else 0.0 for g, h in zip(gap, held)]
         self._build()
@@ -884,14 +886,15 @@ class MujocoArm:
         if self.play:
             q = d.qpos
             half = self.effects["backlash"]["gap"]
+            gk, gd = self.gear_kd
             for mi, dof, qa in self.play:
                 x, xd = q[qa], v[dof]
                 h = 0.5 * half[mi]
                 if x > h:
-                    f = -BACKLASH_K * (x - h) - BACKLASH_D * xd
+                    f = -gk * (x - h) - gd * xd
                     qf[dof] += min(f, 0.0)
                 elif x < -h:
-                    f = -BACKLASH_K * (x + h) - BACKLASH_D * xd
+                    f = -gk * (x + h) - gd * xd
                     qf[dof] += max(f, 0.0)
         wr = self.effects.get("wrinkling")
         if wr:
@@ -982,7 +985,7 @@ class MujocoArm:
                 gaps = self.effects["backlash"]["gap"]
                 for mi, dof, qa in self.play:
                     load = r[dof] - (d.qfrc_applied[dof])
-                    x[qa] = (math.copysign(0.5 * gaps[mi], load) + load / BACKLASH_K) if abs(load) > 1e-9 else 0.0
+                    x[qa] = (math.copysign(0.5 * gaps[mi], load) + load / self.gear_kd[0]) if abs(load) > 1e-9 else 0.0
             x = _newton(res, x)
             if np.abs(res(x)).max() < 1e-8:
                 break

@@ -547,6 +547,48 @@ def test_variants_of_one_effect_are_combined_where_the_truth_has_both(tmp_path):
     assert s.error_after < 0.3, s.error_after
 
 
+def _soft_gear_run(tmp_path, gear_k=2e4, gear_d=40.0, gap=0.03):
+    """A MuJoCo run whose joint-2 gear has play and compliant flanks (a unilateral
+    spring-damper, 0.1 kg·m² on its link side): 6 s multisine at 500 Hz, 16-bit encoders."""
+    pytest.importorskip("mujoco")
+    sp = F.RunSpec(engine="mujoco", family="backlash", index=0, seed=5, duration=6.0, rate=500.0, style="multisine", encoder_bits=16,
+                   effects={"backlash": {"gap": [0.0, gap, 0.0], "gear_k": gear_k, "gear_d": gear_d}})
+    path, _ = F.make_run(sp, tmp_path)
+    return _read(path)
+
+
+def test_compliant_flanks_replay_another_engines_compliant_gear(tmp_path):
+    """popup's compliant flanks (``contact_k``, ``contact_c``) against MuJoCo's gear contact
+    (the same unilateral spring-damper, written as MuJoCo applied forces on a rotor with its
+    own servo): at the truth's values they replay the run far better than the rigid flanks
+    at the truth's gap and link-side inertia, on every channel group the gear moves."""
+    from popup.problem import ReplayProblem
+
+    run = _soft_gear_run(tmp_path)
+    gap = [0.0, 0.03, 0.0]
+    rigid = run.model().with_effect("backlash", gap=gap, inertia=[0.1] * 3)
+    soft = rigid.with_effect("backlash", contact_k=[2e4] * 3, contact_c=[40.0] * 3)
+    soft = soft.with_dt(soft.stable_dt(replay=True) * 0.5)
+    base = ReplayProblem(run.model(), run, threads=1)  # one set of noise floors for both
+    (s_rigid, rigid_c), (s_soft, soft_c) = base.with_model(rigid).error(), base.with_model(soft).error()
+    for c in ("ee_z", "imu1_ay", "imu2_ax", "imu2_ay", "tau3"):
+        assert soft_c[c] < 0.3 * rigid_c[c], (c, soft_c, rigid_c)
+    assert s_soft < 0.3 * s_rigid, (s_soft, s_rigid)
+
+
+@pytest.mark.slow
+def test_a_compliant_gear_is_diagnosed_as_compliant_flanks(tmp_path):
+    """The diagnosis on that run (about 200 s): backlash with the compliant flanks variant
+    (and the fitted link-side inertia), on the truth's gap, flank stiffness and inertia."""
+    run = _soft_gear_run(tmp_path)
+    d = popup.diagnose(run.model(), run, effects=["backlash"], threads=1)
+    s = d.suspects[0]
+    assert s.significant and "compliant flanks" in s.variant, (s.variant, s.message)
+    assert abs(s.params["gap"][1] - 0.03) < 0.05 * 0.03, s.params
+    assert abs(s.params["contact_k"][1] - 2e4) < 0.25 * 2e4, s.params
+    assert abs(s.params["inertia"][1] - 0.1) < 0.2 * 0.1, s.params
+
+
 def _quiet_mujoco_nominal(n, seed, i, bits, tmp_path):
     """Run ``i`` of a MuJoCo nominal family (``n`` runs, ``seed``): ``bits``-bit encoders, quiet sensors."""
     pytest.importorskip("mujoco")

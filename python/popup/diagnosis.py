@@ -228,7 +228,14 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
     "backlash": [{"name": "fitted link-side inertia", "extra": ["inertia"], "seeds": [{"inertia": 0.003}, {"inertia": 0.03}, {"inertia": 0.1}, {"inertia": 0.3}]},
                  # a link side held by its bearing's friction, moved only by the flanks: another
                  # law, not a refinement, so it is tried even when the free gear is not significant
-                 {"name": "held link side (play operator)", "structure": {"held": [1.0, 1.0, 1.0]}, "alternative": True}],
+                 {"name": "held link side (play operator)", "structure": {"held": [1.0, 1.0, 1.0]}, "alternative": True},
+                 # a compliant gear: its flanks a unilateral spring-damper (the elasto-backlash
+                 # law of Modelica and Simscape), which also carries the gear's own compliance
+                 # while it pushes; run at the step of its stiffest plausible flank
+                 {"name": "compliant flanks", "extra": ["contact_k", "contact_c"],
+                  "structure": {"contact_k": [1e4, 1e4, 1e4], "contact_c": [5.0, 5.0, 5.0]},
+                  "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [est.BOUNDS[("backlash", "contact_c")][1]] * 3},
+                  "seeds": [{"contact_k": 3e3, "contact_c": 3.0}, {"contact_k": 3e4, "contact_c": 10.0}, {"contact_k": 1e5, "contact_c": 30.0}]}],
     "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
                 {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
 }
@@ -1040,6 +1047,8 @@ def _try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: in
                      for k in _STIFFEST.get(name, {}) if k in base_params} if var.get("structure") else None
             if var.get("structure") and stiff:
                 start = {k: base_params[k] for k in stiff}
+            if var.get("stiffest"):
+                stiff = dict(var["stiffest"])
             vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also, stiffest=stiff)
         except Exception as e:  # noqa: BLE001
             notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
@@ -1067,7 +1076,10 @@ def _combined(a: Mapping[str, Any], b: Mapping[str, Any]) -> Optional[Dict[str, 
     if set(sa) & set(sb):
         return None
     extra = sorted(set(a.get("extra") or []) | set(b.get("extra") or []))
-    return {"name": f"{a['name']} + {b['name']}", "structure": {**sa, **sb}, "extra": extra}
+    out: Dict[str, Any] = {"name": f"{a['name']} + {b['name']}", "structure": {**sa, **sb}, "extra": extra}
+    if a.get("stiffest") or b.get("stiffest"):
+        out["stiffest"] = {**dict(a.get("stiffest") or {}), **dict(b.get("stiffest") or {})}
+    return out
 
 
 def _variant_named(effect: str, name: str) -> Optional[Dict[str, Any]]:
@@ -1113,6 +1125,8 @@ def _try_combined(prob: ReplayProblem, name: str, best: _Fitted, best_var: Mappi
             start = {k: v for k, v in params.items() if k in only}
             stiff = ({k: [min(1.5 * x, est.BOUNDS.get((name, k), (0.0, math.inf))[1]) for x in params[k]]
                       for k in _STIFFEST.get(name, {}) if k in params} if cv["structure"] else None) or None
+            if cv.get("stiffest"):
+                stiff = dict(cv["stiffest"])
             cf, _ = _fit_candidate(prob, name, struct, only, start, var.get("seeds"), max_iter, variant=cv["name"], also=also,
                                    stiffest=stiff, seeds=bool(set(var.get("extra") or []) - set(best_var.get("extra") or [])))
         except Exception as e:  # noqa: BLE001

@@ -74,6 +74,8 @@ PARAM_SCALE: Dict[Tuple[str, str], float] = {
     ("joint_friction", "v_eps"): 1.0,  # fitted as ln v_eps (LOG_PARAMS)
     ("backlash", "gap"): 1e-3,
     ("backlash", "inertia"): 1.0,  # fitted as ln J (LOG_PARAMS)
+    ("backlash", "contact_k"): 1.0,  # fitted as ln k_c (LOG_PARAMS)
+    ("backlash", "contact_c"): 10.0,
     ("higher_bending_modes", "k_scale"): 0.5,
     ("higher_bending_modes", "root_ratio"): 1.0,  # fitted as ln r (LOG_PARAMS)
     ("higher_bending_modes", "e_pa"): 1e8,
@@ -123,6 +125,11 @@ BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
     # a gear's link side: from an output flange alone to a whole motoreducer's reflected
     # inertia (below 1e-3 kg·m² its free mode needs a step far below a lab rate)
     ("backlash", "inertia"): (1e-3, 1.0),
+    # a compliant gear's flanks: from a soft coupling to a stiff harmonic drive's
+    # 1e5 N·m/rad; stiffer contacts ring far above a lab rate (and need a tiny step), which
+    # the rigid flanks stand for; the damping up to about critical at 0.01 kg·m²
+    ("backlash", "contact_k"): (1e3, 1e5),
+    ("backlash", "contact_c"): (0.0, 50.0),
     # the friction sign's width: below ~5e-4 rad/s it is narrower than the velocity noise of
     # a smoothed lab encoder (the sign would flip with the noise), above 0.3 rad/s it is viscous
     ("joint_friction", "v_eps"): (5e-4, 0.3),
@@ -132,7 +139,7 @@ BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
 }
 
 #: Positive parameters fitted as their logarithm (module docs).
-LOG_PARAMS = {("torsion", "k_t"), ("backlash", "inertia"), ("joint_friction", "v_eps"), ("higher_bending_modes", "root_ratio")}
+LOG_PARAMS = {("torsion", "k_t"), ("backlash", "inertia"), ("backlash", "contact_k"), ("joint_friction", "v_eps"), ("higher_bending_modes", "root_ratio")}
 
 _NUDGE = 0.2
 

@@ -19,6 +19,14 @@
 //! and finishes with the new modes (at most [`MAX_CONTACTS_PER_STEP`] cuts). A contact that
 //! opens inside a step is seen at the next one (first order in dt at the release).
 //!
+//! **Compliant flanks** (`contact_k` k_c > 0 on a joint): the link side is always free, and
+//! past a flank the gear pushes it with the unilateral spring-damper
+//! `τ_g = −k_c (x − h) − c_c ẋ` (x > h, never positive) or `−k_c (x + h) − c_c ẋ` (x < −h,
+//! never negative), 0 inside the gap ([`contact_torque`]): the elasto-backlash law of
+//! Modelica's `ElastoBacklash` and of Simscape's hard stops. No impacts and no modes: the
+//! contact is a force, integrated like the springs (its stiffness enters the step check).
+//! It is the rigid law's limit as k_c → ∞ with c_c critical (plastic) or 0 (elastic).
+//!
 //! At rest (no initial state given) each link side lies on the flank its static load
 //! pushes it to; an unloaded one (e.g. a vertical axis) sits in the middle of its gap.
 //!
@@ -120,8 +128,13 @@ pub fn modes(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: 
     let (qm, vm, _) = s.eval(t);
     let mut g = RIGID;
     let mut side = [0.0f64; 3];
+    let fx = &pd.params.effects.backlash;
     for (k, &p) in model.motor_idx.iter().enumerate() {
         if gap[k] == 0.0 {
+            continue;
+        }
+        if fx.compliant(k) {
+            g.free[k] = true;
             continue;
         }
         let h = 0.5 * gap[k];
@@ -192,7 +205,7 @@ pub fn first_contact(model: &Model, pd: &ParamData, drive: &Drive, g: &Gears, t:
     let (qb, vb, _) = s.eval(t + h);
     let mut first: Option<(f64, usize, f64)> = None;
     for (k, &p) in model.motor_idx.iter().enumerate() {
-        if !g.free[k] || gap[k] == 0.0 {
+        if !g.free[k] || gap[k] == 0.0 || pd.params.effects.backlash.compliant(k) {
             continue;
         }
         let half = 0.5 * gap[k];
@@ -235,7 +248,7 @@ pub fn impacts(model: &Model, pd: &ParamData, drive: &Drive, g: &Gears, t: f64, 
     let gap = pd.params.effects.backlash.free_gap();
     let (qm, vm, _) = s.eval(t);
     for (k, &p) in model.motor_idx.iter().enumerate() {
-        if !g.free[k] || gap[k] == 0.0 {
+        if !g.free[k] || gap[k] == 0.0 || pd.params.effects.backlash.compliant(k) {
             continue;
         }
         let h = 0.5 * gap[k];
@@ -290,6 +303,7 @@ pub fn rest(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result<State
     }
     let g = gravity_torque(model, pd, &st.q);
     let scale = model.motor_idx.iter().map(|&p| g[p].abs()).fold(0.0, f64::max);
+    let fx = &pd.params.effects.backlash;
     let mut ql = qm;
     for (k, &p) in model.motor_idx.iter().enumerate() {
         // the gear holds the link with τ_g = G_p: pushing forwards puts the link side behind
@@ -297,5 +311,63 @@ pub fn rest(model: &Model, pd: &ParamData, t: f64, qm: [f64; 3]) -> Result<State
             ql[k] -= g[p].signum() * 0.5 * gap[k];
         }
     }
-    rest_state(model, pd, t, ql)
+    if !(0..3).any(|k| fx.compliant(k)) {
+        return rest_state(model, pd, t, ql);
+    }
+    // a compliant flank is pressed in by G_p/k_c more, with G_p the load at the pressed-in
+    // pose (a fixed point: G_p/k_c is a small correction)
+    let flank = ql;
+    let mut st = rest_state(model, pd, t, ql)?;
+    for _ in 0..8 {
+        let g = gravity_torque(model, pd, &st.q);
+        let mut moved = 0.0f64;
+        for (k, &p) in model.motor_idx.iter().enumerate() {
+            if fx.compliant(k) && g[p].abs() > 1e-9 * scale.max(1e-12) {
+                let want = flank[k] - g[p] / fx.contact_k[k];
+                moved = moved.max((want - ql[k]).abs());
+                ql[k] = want;
+            }
+        }
+        st = rest_state(model, pd, t, ql)?;
+        if moved < 1e-15 {
+            break;
+        }
+    }
+    Ok(st)
+}
+
+/// The torque a compliant flank contact of gear `k` applies to its link side [N·m] at the
+/// play x = q_l − q_m [rad] and its rate ẋ [rad/s] (module docs); 0 inside the gap and for
+/// a gear with rigid flanks.
+#[inline]
+pub fn contact_torque(b: &crate::effects::Backlash, k: usize, x: f64, xd: f64) -> f64 {
+    if !b.compliant(k) {
+        return 0.0;
+    }
+    let h = 0.5 * b.gap[k];
+    if x > h {
+        (-b.contact_k[k] * (x - h) - b.contact_c[k] * xd).min(0.0)
+    } else if x < -h {
+        (-b.contact_k[k] * (x + h) - b.contact_c[k] * xd).max(0.0)
+    } else {
+        0.0
+    }
+}
+
+/// The compliant contacts' torques on the link-side rows at (t, q, q̇) in replay (0 on
+/// every other row and joint; `None` when no gear has compliant flanks).
+#[inline]
+pub fn contact_torques(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &VecN, v: &VecN) -> Option<[f64; 3]> {
+    let b = &pd.params.effects.backlash;
+    if !(0..3).any(|k| b.compliant(k)) {
+        return None;
+    }
+    let Drive::Replay(s) = drive else {
+        return None;
+    };
+    let (qm, vm, _) = s.eval(t);
+    Some(std::array::from_fn(|k| {
+        let p = model.motor_idx[k];
+        contact_torque(b, k, q[p] - qm[k], v[p] - vm[k])
+    }))
 }

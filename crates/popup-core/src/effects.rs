@@ -18,7 +18,9 @@
 //!   in replay) and the link side of each motor joint, which becomes a degree of freedom of
 //!   its own: free inside the gap (with the gear's link-side `inertia`), in rigid unilateral
 //!   contact on a flank while the gear pushes, plastic impact when it reaches a flank
-//!   (`crate::backlash`). With `held = 1` the link side is held inside the gap instead and
+//!   (`crate::backlash`). With `contact_k > 0` the flanks are compliant instead (a
+//!   unilateral spring-damper `τ_g = −k_c(x ∓ gap/2) − c_c ẋ` past a flank, never pulling:
+//!   the elasto-backlash law of Modelica and Simscape). With `held = 1` the link side is held inside the gap instead and
 //!   follows the play operator `q_l ← clamp(q_l, q_m − gap/2, q_m + gap/2)` of the encoder
 //!   angle (started centred), prescribed like a rigid gear.
 //! - `pressure_leak`: `p(t) = p₀ e^{−rate·t}` per link (t on the run's clock); k(p), c(p)
@@ -88,10 +90,15 @@ pub struct Backlash {
     /// and only moves when a flank pushes it: a play operator on the encoder angle, started
     /// in the middle of the gap; 0 = free inside the gap (the gear with play) [1].
     pub held: [f64; 3],
+    /// Stiffness of the gear's flanks [N·m/rad]: 0 = rigid flanks (contact as a constraint,
+    /// impacts with `restitution`); > 0 = a compliant contact past the flank.
+    pub contact_k: [f64; 3],
+    /// Damping of a compliant flank contact [N·m·s/rad] (with `contact_k > 0`).
+    pub contact_c: [f64; 3],
 }
 impl Default for Backlash {
     fn default() -> Self {
-        Backlash { gap: [0.0; 3], inertia: [BACKLASH_INERTIA; 3], restitution: [0.0; 3], held: [0.0; 3] }
+        Backlash { gap: [0.0; 3], inertia: [BACKLASH_INERTIA; 3], restitution: [0.0; 3], held: [0.0; 3], contact_k: [0.0; 3], contact_c: [0.0; 3] }
     }
 }
 impl Backlash {
@@ -105,6 +112,12 @@ impl Backlash {
     #[inline]
     pub fn free_gap(&self) -> [f64; 3] {
         std::array::from_fn(|k| if self.held[k] == 0.0 { self.gap[k] } else { 0.0 })
+    }
+
+    /// Whether motor joint `k`'s link side is free in its gap with compliant flanks.
+    #[inline]
+    pub fn compliant(&self, k: usize) -> bool {
+        self.gap[k] != 0.0 && self.held[k] == 0.0 && self.contact_k[k] > 0.0
     }
 
     /// Gaps whose link side is held inside them (a play operator on the encoder) [rad].
@@ -347,6 +360,8 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
         integer: true,
         doc: "1 = the link side is held inside the gap and only moves when a flank pushes it (play operator on the encoder, started centred); 0 = free inside the gap",
     },
+    p("backlash", "contact_k", "N·m/rad", 3, 0.0, 0.0, 1e9, false, "stiffness of the gear's flanks: 0 = rigid (impacts with restitution), > 0 = a compliant unilateral contact past a flank"),
+    p("backlash", "contact_c", "N·m·s/rad", 3, 0.0, 0.0, 1e6, false, "damping of a compliant flank contact (with contact_k > 0)"),
     ParamSpec {
         effect: "higher_bending_modes",
         name: "segments",
@@ -406,7 +421,7 @@ pub const PARAMS: [ParamSpec; NPARAM] = [
 ];
 
 /// Number of registered parameters.
-pub const NPARAM: usize = 32;
+pub const NPARAM: usize = 34;
 
 /// Length of the flat effect vector.
 pub const NE: usize = {
@@ -443,6 +458,8 @@ impl Effects {
             &e.backlash.inertia,
             &e.backlash.restitution,
             &e.backlash.held,
+            &e.backlash.contact_k,
+            &e.backlash.contact_c,
             &e.higher_bending_modes.segments,
             &e.higher_bending_modes.k_scale,
             &e.higher_bending_modes.root_ratio,
@@ -481,6 +498,8 @@ impl Effects {
             &mut e.backlash.inertia,
             &mut e.backlash.restitution,
             &mut e.backlash.held,
+            &mut e.backlash.contact_k,
+            &mut e.backlash.contact_c,
             &mut e.higher_bending_modes.segments,
             &mut e.higher_bending_modes.k_scale,
             &mut e.higher_bending_modes.root_ratio,
@@ -594,12 +613,14 @@ impl Effects {
 
 /// The parameters that only shape an effect: they change nothing while the effect's
 /// strength parameters are neutral (so [`Effects::is_neutral`] ignores them).
-pub const SHAPING: [(&str, &str); 14] = [
+pub const SHAPING: [(&str, &str); 16] = [
     ("joint_friction", "v_s"),
     ("joint_friction", "v_eps"),
     ("backlash", "inertia"),
     ("backlash", "restitution"),
     ("backlash", "held"),
+    ("backlash", "contact_k"),
+    ("backlash", "contact_c"),
     ("torsion", "c_t"),
     ("higher_bending_modes", "k_scale"),
     ("higher_bending_modes", "root_ratio"),

@@ -244,6 +244,15 @@ fn solve_accel_in_place(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q:
         rhs += crate::effects::drag_forces(model, &pd.drag.0[..pd.drag.1], fx.air_drag.cd, &rot, v);
     }
     add_armature(model, pd, m, free);
+    if *free != ALL_PRESCRIBED {
+        if let Some(tg) = crate::backlash::contact_torques(model, pd, drive, t, q, v) {
+            for (k, &p) in model.motor_idx.iter().enumerate() {
+                if free[k] {
+                    rhs[p] += tg[k];
+                }
+            }
+        }
+    }
     if h_implicit > 0.0 {
         let c = damping_diag(model, pd);
         for i in 0..n {

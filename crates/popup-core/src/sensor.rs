@@ -191,11 +191,17 @@ pub fn sample_free(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
         let (qk, vk) = motor.map_or((q[i], v[i]), |(qm, vm)| (qm[k], vm[k]));
         row[1 + k] = qk;
         row[4 + k] = vk;
-        // row i of M q̈ + b (minus external loads), plus the motoreducer's own friction
-        let mut tau = mat_vec_row(&m, &qdd, i, model.nv) + b[i];
-        if let Some(dr) = &drag {
-            tau -= dr[i];
-        }
+        // row i of M q̈ + b (minus external loads), plus the motoreducer's own friction; a
+        // compliant flank's torque is the gear's (the link side's inertia is behind it)
+        let mut tau = if fx.backlash.compliant(k) && free[k] {
+            crate::backlash::contact_torque(&fx.backlash, k, q[i] - qk, v[i] - vk)
+        } else {
+            let mut t_row = mat_vec_row(&m, &qdd, i, model.nv) + b[i];
+            if let Some(dr) = &drag {
+                t_row -= dr[i];
+            }
+            t_row
+        };
         if fx.joint_friction.on() {
             tau += crate::effects::friction_torque(&fx.joint_friction, k, vk);
         }

@@ -167,8 +167,18 @@ pub fn linear_eigs(model: &Model, pd: &ParamData, q: &VecN, free: &[usize], with
             mm[(p, p)] += pd.params.effects.backlash.inertia[k] - model.armature[p];
         }
     }
-    let kk = stiffness(model, pd, q);
-    let cc = if with_damping { damping_matrix(model, pd) } else { MatN::zeros() };
+    let mut kk = stiffness(model, pd, q);
+    let mut cc = if with_damping { damping_matrix(model, pd) } else { MatN::zeros() };
+    // a compliant flank in contact ties its link side to the prescribed motor side
+    let bl = &pd.params.effects.backlash;
+    for (k, &p) in model.motor_idx.iter().enumerate() {
+        if bl.compliant(k) && free.contains(&p) {
+            kk[(p, p)] += bl.contact_k[k];
+            if with_damping {
+                cc[(p, p)] += bl.contact_c[k];
+            }
+        }
+    }
     let m = DMatrix::from_fn(n, n, |i, j| mm[(free[i], free[j])]);
     let k = DMatrix::from_fn(n, n, |i, j| kk[(free[i], free[j])]);
     let c = DMatrix::from_fn(n, n, |i, j| cc[(free[i], free[j])]);

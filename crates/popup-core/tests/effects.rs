@@ -111,7 +111,11 @@ fn every_parameter_moves_the_outputs() {
                 ("joint_friction", "v_s") => base.joint_friction.tau_s = [1.0; 3],
                 ("joint_friction", "v_eps") => base.joint_friction.tau_c = [1.0; 3],
                 ("wrinkling", "mw_scale") => base.wrinkling.ratio = 0.3,
-                ("backlash", "inertia" | "restitution") => base.backlash.gap = [0.02; 3],
+                ("backlash", "inertia" | "restitution" | "contact_k") => base.backlash.gap = [0.02; 3],
+                ("backlash", "contact_c") => {
+                    base.backlash.gap = [0.02; 3];
+                    base.backlash.contact_k = [1e4; 3];
+                }
                 _ => {}
             }
             let mut v = base.to_flat();
@@ -123,6 +127,7 @@ fn every_parameter_moves_the_outputs() {
                 ("payload_mass", "delta_kg") => 0.5,
                 ("payload_mass", "com_offset_m") => 0.05,
                 ("backlash", "gap") => 0.02,
+                ("backlash", "contact_k") => 1e4,
                 ("pressure_leak", "rate") => 0.2,
                 ("sensor_delay", _) => 0.013,
                 ("air_drag", "cd") => 5.0,
