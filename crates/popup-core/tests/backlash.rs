@@ -6,15 +6,15 @@
 
 mod common;
 
-use common::col;
+use common::{col, lab_pd, max_abs_diff, ramp, replay_2ms};
 use popup_core::backlash::{self, Gears};
 use popup_core::drive::{Drive, Spline3};
 use popup_core::effects::Effects;
 use popup_core::integrate::{step_with, Workspace};
 use popup_core::math::VecN;
 use popup_core::model::{Model, Options};
-use popup_core::params::{ParamData, Params};
-use popup_core::sim::{run, RunConfig, Trajectory};
+use popup_core::params::ParamData;
+use popup_core::sim::{run, RunConfig};
 use popup_core::spec::ArmSpec;
 use popup_core::statics::{gravity_torque, mass_matrix};
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -23,24 +23,6 @@ fn model() -> Model {
     Model::compile(&ArmSpec::popup_lab(), Options::default()).unwrap()
 }
 
-fn pd(m: &Model, fx: Effects) -> ParamData {
-    ParamData::new(m, &Params { payload_kg: 1.0, pressure_pa: [30e3; 2], effects: fx }).unwrap()
-}
-
-/// smootherstep 0 → 1 over [0, 1] (zero rate and acceleration at both ends)
-fn ramp(u: f64) -> f64 {
-    let u = u.clamp(0.0, 1.0);
-    u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
-}
-
-fn replay(m: &Model, fx: Effects, t: &[f64], y: &[[f64; 3]]) -> Trajectory {
-    let cfg = RunConfig { drive: Drive::Replay(Spline3::new(t, y).unwrap()), initial: None, duration: None, sample_period: 2e-3, check_step: true };
-    run(m, &pd(m, fx), &cfg).unwrap()
-}
-
-fn max_abs_diff(a: &Trajectory, b: &Trajectory, ch: &str) -> f64 {
-    col(a, ch).iter().zip(col(b, ch)).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
-}
 
 #[test]
 fn a_link_held_by_gravity_rests_on_one_flank_and_equals_the_shifted_rigid_gear() {
@@ -53,14 +35,14 @@ fn a_link_held_by_gravity_rests_on_one_flank_and_equals_the_shifted_rigid_gear()
     let y: Vec<[f64; 3]> = t.iter().map(|&t| [0.0, -FRAC_PI_2 + 1.2 + 0.2 * ramp(t / 2.0), 0.3]).collect();
     let mut fx = Effects::default();
     fx.backlash.gap = [0.0, gap, 0.0];
-    let a = replay(&m, fx, &t, &y);
-    let p0 = pd(&m, Effects::default());
+    let a = replay_2ms(&m, fx, &t, &y);
+    let p0 = lab_pd(&m, Effects::default());
     let st = popup_core::sim::rest_state(&m, &p0, 0.0, y[0]).unwrap();
     let g = gravity_torque(&m, &p0, &st.q)[m.motor_idx[1]];
     assert!(g.abs() > 1.0, "the pose must load joint 2 ({g} N·m)");
     let shift = -g.signum() * gap / 2.0;
     let ys: Vec<[f64; 3]> = y.iter().map(|r| [r[0], r[1] + shift, r[2]]).collect();
-    let b = replay(&m, Effects::default(), &t, &ys);
+    let b = replay_2ms(&m, Effects::default(), &t, &ys);
     // the encoder channel reads the motor side; the physics is the shifted one
     assert_eq!(col(&a, "q2"), y.iter().map(|r| r[1]).collect::<Vec<_>>());
     for ch in ["ee_x", "ee_z", "imu2_ax", "imu2_az", "tau2", "tau3", "d11", "d21"] {
@@ -74,7 +56,7 @@ fn a_link_held_by_gravity_rests_on_one_flank_and_equals_the_shifted_rigid_gear()
         assert!(d < 1e-9 * scale, "{ch}: {d:e} (scale {scale})");
     }
     // and it differs from the rigid gear by the shift
-    let c = replay(&m, Effects::default(), &t, &y);
+    let c = replay_2ms(&m, Effects::default(), &t, &y);
     assert!(max_abs_diff(&a, &c, "ee_z") > 0.5 * gap / 2.0 * 0.5, "the flank must show in the end effector");
 }
 
@@ -99,7 +81,7 @@ fn a_free_link_side_keeps_its_momentum_across_the_gap_and_stops_on_the_far_flank
     let gap = 0.05;
     let mut fx = Effects::default();
     fx.backlash.gap = [gap, 0.0, 0.0];
-    let p = pd(&m, fx);
+    let p = lab_pd(&m, fx);
     let dt = m.options.dt;
     let t: Vec<f64> = (0..=3000).map(|k| k as f64 * 1e-3).collect();
     let y: Vec<[f64; 3]> = t.iter().map(|&t| [0.4 * ramp(t / 0.8) + 0.3 * ramp((t - 1.2) / 0.6), -FRAC_PI_2 + 0.6, 0.4]).collect();
@@ -145,7 +127,7 @@ fn an_impact_has_its_restitution_and_its_impulse_acts_on_its_row_only() {
         let mut fx = Effects::default();
         fx.backlash.gap = [0.0, 0.02, 0.0];
         fx.backlash.restitution = [0.0, e, 0.0];
-        let p = pd(&m, fx);
+        let p = lab_pd(&m, fx);
         let mut st = popup_core::sim::rest_state(&m, &p, 0.0, [0.1, -FRAC_PI_2 + 0.8, 0.5]).unwrap();
         for i in 0..m.nv {
             st.v[i] = 0.05 * (i as f64 + 1.0) * if i % 2 == 0 { 1.0 } else { -1.0 };
@@ -192,11 +174,11 @@ fn a_vanishing_gap_converges_to_the_rigid_gear() {
             [0.3 * w * (2.0 * PI * 0.6 * t).sin(), -FRAC_PI_2 + 0.9 + 0.2 * w * (2.0 * PI * 0.5 * t).sin(), 0.4 + 0.3 * w * (2.0 * PI * 0.7 * t).sin()]
         })
         .collect();
-    let rigid = replay(&m, Effects::default(), &t, &y);
+    let rigid = replay_2ms(&m, Effects::default(), &t, &y);
     let err = |gap: f64| {
         let mut fx = Effects::default();
         fx.backlash.gap = [gap; 3];
-        let a = replay(&m, fx, &t, &y);
+        let a = replay_2ms(&m, fx, &t, &y);
         max_abs_diff(&a, &rigid, "ee_x").max(max_abs_diff(&a, &rigid, "ee_y")).max(max_abs_diff(&a, &rigid, "ee_z"))
     };
     let e: Vec<f64> = [1e-3, 1e-5, 1e-7, 1e-9].iter().map(|&g| err(g)).collect();
@@ -213,17 +195,17 @@ fn backlash_runs_are_deterministic_and_torque_drive_and_beam_links_are_refused()
     let y: Vec<[f64; 3]> = t.iter().map(|&t| [0.3 * (2.0 * PI * t).sin() * ramp(t), -FRAC_PI_2 + 0.5, 0.3]).collect();
     let mut fx = Effects::default();
     fx.backlash.gap = [0.01, 0.02, 0.015];
-    let a = replay(&m, fx, &t, &y);
-    let b = replay(&m, fx, &t, &y);
+    let a = replay_2ms(&m, fx, &t, &y);
+    let b = replay_2ms(&m, fx, &t, &y);
     assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()));
     let drive = Drive::Torque(popup_core::drive::Linear3::new(&[0.0], &[[0.0; 3]]).unwrap());
-    let e = run(&m, &pd(&m, fx), &RunConfig { drive, initial: None, duration: Some(0.1), sample_period: 2e-3, check_step: true }).unwrap_err();
+    let e = run(&m, &lab_pd(&m, fx), &RunConfig { drive, initial: None, duration: Some(0.1), sample_period: 2e-3, check_step: true }).unwrap_err();
     assert!(e.to_string().contains("effects.backlash.gap"), "{e}");
     let mut spec = ArmSpec::popup_lab();
     spec.effects.higher_bending_modes.elements = [2.0, 0.0];
     let mb = Model::compile(&spec, Options::default()).unwrap();
     let cfg = RunConfig { drive: Drive::Replay(Spline3::new(&t, &y).unwrap()), initial: None, duration: None, sample_period: 2e-3, check_step: true };
-    let e = run(&mb, &pd(&mb, fx), &cfg).unwrap_err();
+    let e = run(&mb, &lab_pd(&mb, fx), &cfg).unwrap_err();
     assert!(e.to_string().contains("beam links"), "{e}");
 }
 
@@ -254,9 +236,9 @@ fn a_held_link_side_follows_the_play_operator() {
     let mut fx = Effects::default();
     fx.backlash.gap = [2.0 * h, 0.0, 0.0];
     fx.backlash.held = [1.0, 0.0, 0.0];
-    let a = replay(&m, fx, &t, &y);
+    let a = replay_2ms(&m, fx, &t, &y);
     let yl: Vec<[f64; 3]> = t.iter().zip(&y).map(|(&t, r)| [played(t, r[0], h), r[1], r[2]]).collect();
-    let b = replay(&m, Effects::default(), &t, &yl);
+    let b = replay_2ms(&m, Effects::default(), &t, &yl);
     assert_eq!(col(&a, "q1"), y.iter().map(|r| r[0]).collect::<Vec<_>>());
     for ch in ["ee_x", "ee_y", "ee_z", "imu2_ay", "tau1", "d11"] {
         let d = max_abs_diff(&a, &b, ch);
@@ -265,15 +247,15 @@ fn a_held_link_side_follows_the_play_operator() {
     }
     // a free link side does something else: it coasts ahead while the motor brakes
     fx.backlash.held = [0.0; 3];
-    let c = replay(&m, fx, &t, &y);
+    let c = replay_2ms(&m, fx, &t, &y);
     assert!(max_abs_diff(&a, &c, "ee_y") > 0.1 * h, "held and free gears must differ");
     // and a held gap needs no free row, so beam links take it
     fx.backlash.held = [1.0, 0.0, 0.0];
     let mut spec = ArmSpec::popup_lab();
     spec.effects.higher_bending_modes.elements = [2.0, 0.0];
     let mb = Model::compile(&spec, Options { dt: 2e-4, ..Options::default() }).unwrap();
-    let ab = replay(&mb, fx, &t, &y);
-    let bb = replay(&mb, Effects::default(), &t, &yl);
+    let ab = replay_2ms(&mb, fx, &t, &y);
+    let bb = replay_2ms(&mb, Effects::default(), &t, &yl);
     assert!(max_abs_diff(&ab, &bb, "ee_y") < 1e-9, "beam links with a held gap");
 }
 

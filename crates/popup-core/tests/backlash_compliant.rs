@@ -6,11 +6,10 @@
 
 mod common;
 
-use common::col;
+use common::{col, lab_pd, max_abs_diff, ramp, replay_2ms};
 use popup_core::drive::{Drive, Spline3};
 use popup_core::effects::Effects;
 use popup_core::model::{Model, Options};
-use popup_core::params::{ParamData, Params};
 use popup_core::sim::{run, RunConfig, Trajectory};
 use popup_core::spec::ArmSpec;
 use popup_core::statics::gravity_torque;
@@ -20,23 +19,6 @@ fn model(dt: f64) -> Model {
     Model::compile(&ArmSpec::popup_lab(), Options { dt, ..Options::default() }).unwrap()
 }
 
-fn pd(m: &Model, fx: Effects) -> ParamData {
-    ParamData::new(m, &Params { payload_kg: 1.0, pressure_pa: [30e3; 2], effects: fx }).unwrap()
-}
-
-fn ramp(u: f64) -> f64 {
-    let u = u.clamp(0.0, 1.0);
-    u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
-}
-
-fn replay(m: &Model, fx: Effects, t: &[f64], y: &[[f64; 3]]) -> Trajectory {
-    let cfg = RunConfig { drive: Drive::Replay(Spline3::new(t, y).unwrap()), initial: None, duration: None, sample_period: 2e-3, check_step: true };
-    run(m, &pd(m, fx), &cfg).unwrap()
-}
-
-fn max_abs_diff(a: &Trajectory, b: &Trajectory, ch: &str) -> f64 {
-    col(a, ch).iter().zip(col(b, ch)).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
-}
 
 #[test]
 fn a_loaded_link_rests_at_the_flank_plus_its_static_deflection() {
@@ -52,9 +34,9 @@ fn a_loaded_link_rests_at_the_flank_plus_its_static_deflection() {
     fx.backlash.gap = [0.0, gap, 0.0];
     fx.backlash.contact_k = [0.0, k, 0.0];
     fx.backlash.contact_c = [0.0, c, 0.0];
-    let a = replay(&m, fx, &t, &y);
+    let a = replay_2ms(&m, fx, &t, &y);
     // the link side's pose: the flank plus the deflection under the load G at that pose
-    let p0 = pd(&m, Effects::default());
+    let p0 = lab_pd(&m, Effects::default());
     let load = |s: f64| {
         let st = popup_core::sim::rest_state(&m, &p0, 0.0, [q0[0], q0[1] + s, q0[2]]).unwrap();
         gravity_torque(&m, &p0, &st.q)[m.motor_idx[1]]
@@ -67,7 +49,7 @@ fn a_loaded_link_rests_at_the_flank_plus_its_static_deflection() {
         g = load(shift);
     }
     let ys: Vec<[f64; 3]> = y.iter().map(|r| [r[0], r[1] + shift, r[2]]).collect();
-    let b = replay(&m, Effects::default(), &t, &ys);
+    let b = replay_2ms(&m, Effects::default(), &t, &ys);
     for ch in ["ee_x", "ee_z", "imu2_ax", "imu2_az", "tau1", "tau2", "tau3", "d11", "d21"] {
         let d = max_abs_diff(&a, &b, ch);
         let scale = col(&b, ch).iter().map(|x| x.abs()).fold(0.0, f64::max).max(1e-3);
@@ -88,7 +70,7 @@ fn spin_and_stop(fx_of: impl Fn(&mut Effects), dt: f64) -> Trajectory {
     fx.backlash.gap = [0.05, 0.0, 0.0];
     fx.backlash.inertia = [0.05, 0.01, 0.01];
     fx_of(&mut fx);
-    replay(&m, fx, &t, &y)
+    replay_2ms(&m, fx, &t, &y)
 }
 
 #[test]
@@ -125,9 +107,9 @@ fn the_step_check_sees_the_contact_stiffness_and_rigid_flanks_are_the_default() 
     fx.backlash.gap = [0.0, 0.02, 0.0];
     assert_eq!(fx.backlash.contact_k, [0.0; 3], "rigid flanks by default");
     let cfg = || RunConfig { drive: Drive::Replay(Spline3::new(&t, &y).unwrap()), initial: None, duration: None, sample_period: 2e-3, check_step: true };
-    run(&m, &pd(&m, fx), &cfg()).unwrap();
+    run(&m, &lab_pd(&m, fx), &cfg()).unwrap();
     fx.backlash.contact_k = [0.0, 1e8, 0.0];
-    let e = run(&m, &pd(&m, fx), &cfg()).unwrap_err();
+    let e = run(&m, &lab_pd(&m, fx), &cfg()).unwrap_err();
     assert!(e.to_string().contains("dt"), "{e}");
     // without a gap the contact parameters shape nothing
     let mut neutral = Effects::default();

@@ -1,11 +1,13 @@
 //! Helpers shared by the contract tests (deterministic RNG, runs, channel access).
 #![allow(dead_code)]
 
-use popup_core::drive::{Drive, Linear3};
+use popup_core::drive::{Drive, Linear3, Spline3};
+use popup_core::effects::Effects;
 use popup_core::math::VecN;
 use popup_core::model::Model;
+use popup_core::params::{ParamData, Params};
 use popup_core::sensor::{channel_index, NCH};
-use popup_core::sim::{State, Trajectory};
+use popup_core::sim::{run, RunConfig, State, Trajectory};
 
 /// xorshift64* — deterministic, no external crate.
 pub struct Rng(pub u64);
@@ -88,4 +90,27 @@ pub fn tip_mass_roots(mu: f64, k: usize) -> Vec<f64> {
         x += 0.01;
     }
     out
+}
+
+/// Smootherstep 0 → 1 over [0, 1] (zero rate and acceleration at both ends).
+pub fn ramp(u: f64) -> f64 {
+    let u = u.clamp(0.0, 1.0);
+    u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
+}
+
+/// The lab arm's parameters (1 kg payload, 30 kPa in both links) with the effects `fx`.
+pub fn lab_pd(m: &Model, fx: Effects) -> ParamData {
+    ParamData::new(m, &Params { payload_kg: 1.0, pressure_pa: [30e3; 2], effects: fx }).unwrap()
+}
+
+/// Encoder replay of the motor angles `y` [rad] at stamps `t` [s] (cubic spline, step
+/// checked), sampled every 2 ms.
+pub fn replay_2ms(m: &Model, fx: Effects, t: &[f64], y: &[[f64; 3]]) -> Trajectory {
+    let cfg = RunConfig { drive: Drive::Replay(Spline3::new(t, y).unwrap()), initial: None, duration: None, sample_period: 2e-3, check_step: true };
+    run(m, &lab_pd(m, fx), &cfg).unwrap()
+}
+
+/// Largest |a − b| over channel `ch` of two runs sampled alike.
+pub fn max_abs_diff(a: &Trajectory, b: &Trajectory, ch: &str) -> f64 {
+    col(a, ch).iter().zip(col(b, ch)).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
 }
