@@ -25,7 +25,9 @@
 //! never negative), 0 inside the gap ([`contact_torque`]): the elasto-backlash law of
 //! Modelica's `ElastoBacklash` and of Simscape's hard stops. No impacts and no modes: the
 //! contact is a force, integrated like the springs (its stiffness enters the step check).
-//! It is the rigid law's limit as k_c → ∞ with c_c critical (plastic) or 0 (elastic).
+//! As k_c → ∞ with the damping ratio growing (c_c ∝ k_c) it converges to the rigid law's
+//! plastic impact (the clamped dashpot's rebound is ~1/(4ζ²)); with c_c = 0 a strike is
+//! elastic.
 //!
 //! At rest (no initial state given) each link side lies on the flank its static load
 //! pushes it to; an unloaded one (e.g. a vertical axis) sits in the middle of its gap.
