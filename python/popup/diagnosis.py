@@ -45,8 +45,8 @@ training blocks: the held-out samples can neither confirm nor refute it; its mes
 
 **Refinement.** A significant effect is also fitted in its richer variants
 (:data:`VARIANTS`: friction with Stribeck terms, three segments for bending, a centre-of-mass
-offset for the payload, compliant flanks for a gear with play, run at the step of its
-stiffest flank, a variant's ``stiffest`` values); a variant is kept when its score beats the base's by more than
+offset for the payload, compliant flanks for a gear with play, run at the step its
+``stiffest`` values allow); a variant is kept when its score beats the base's by more than
 :data:`SCORE_THRESHOLD` (its extra parameters must pay for themselves). An *alternative*
 law of an effect (backlash with the link side held in its gap, a play operator, beside the
 gear with a free link side) is fitted whether or not the base is significant, and the one
