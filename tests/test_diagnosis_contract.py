@@ -72,6 +72,8 @@ def test_a_sharper_friction_sign_is_fitted_as_its_width_not_as_a_stribeck_bump(n
     # test_noise_only_channels_do_not_hide_the_finding keeps the plain Stribeck variant
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_a_stiffer_root_is_fitted_as_the_cantilever_split(nominal, tmp_path):
     """Links that bend like a uniform cantilever: 2 segments with the root joint 4 × as stiff
     as the mid one (the split that gives a cantilever's tip rotation as well as its tip
@@ -253,6 +255,8 @@ def test_held_out_samples_an_effect_does_not_act_on_neither_confirm_nor_refute_i
     assert not _silent_on(np.zeros(200, dtype=bool), z0, z0)  # no held-out samples: nothing to say
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_the_cheap_screen_fully_fits_only_its_best_and_still_finds_the_effect(nominal, tmp_path):
     """``diagnose(screen=1)`` (the loop's rounds from the third on): each candidate is fitted
     from its fit of an earlier round alone, and only the best of that screen gets the full
@@ -334,6 +338,8 @@ def test_a_candidate_refitted_with_the_added_effects_applies_them_as_refitted(no
     assert s.to_dict()["refitted"]["payload_mass"]["delta_kg"] == s.refitted["payload_mass"]["delta_kg"]
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_the_swap_offers_only_candidates_some_round_found_significant(nominal, tmp_path, monkeypatch):
     """The loop's swap step (an effect added earlier replaced by another) offers only the
     candidates that some round's diagnosis found significant, each (effect, candidate)

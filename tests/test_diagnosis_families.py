@@ -505,6 +505,8 @@ def test_the_encoder_floor_of_a_gear_with_play_is_its_own(tmp_path):
     assert 0.5 < float(np.median(ratios)) < 2.0, ratios
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_the_loop_judges_a_model_against_its_own_encoder_floor(tmp_path):
     """The loop bootstraps the encoder floor again on each refitted model: after backlash is
     added on a run of that family, what is left (2.8 noise units; the nominal model's
@@ -526,6 +528,8 @@ def test_the_loop_judges_a_model_against_its_own_encoder_floor(tmp_path):
     assert any("encoder floor bootstrapped again on the model with backlash" in n for n in h.notes), h.notes
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_variants_of_one_effect_are_combined_where_the_truth_has_both(tmp_path):
     """A link of 3 segments whose root spring is stiffer (popup's engine, 1000 Hz multisine)
     is neither the "3 segments" variant nor the "stiffer root" one: each alone leaves
@@ -617,6 +621,8 @@ def test_an_effect_fitted_to_a_coarse_encoders_replay_error_is_not_a_finding(tmp
     assert d.to_dict()["model_at_floor"] is True
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_a_play_narrower_than_the_encoders_readings_is_not_a_finding(tmp_path):
     """A MuJoCo nominal run with 14-bit encoders and quiet sensors (noise × 0.45): its servos
     let the held motors yield to the links by a fraction of a reading. Before popup.unseen a
@@ -737,6 +743,8 @@ def test_the_backward_step_applies_the_rules_that_add_an_effect(tmp_path):
     assert "narrower" in dg._unresolved_play(base.with_model(m2), "backlash", m2.effects_flat)  # the rule that dropped it
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_the_swap_step_replaces_an_effect_that_stood_in_for_a_missing_one(tmp_path):
     """MuJoCo pair run (drag + payload, 200 Hz trapezoid, no torque channels): wrinkling
     fitted alone stands in for the drag, and with the payload refitted beside it the
@@ -775,6 +783,8 @@ def test_the_swap_step_replaces_an_effect_that_stood_in_for_a_missing_one(tmp_pa
     assert len(log) == 1 and log[0].startswith("swap of payload_mass (candidates wrinkling): ") and ("the model stands" in log[0] or "not kept" in log[0]), log
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_an_effect_absorbed_by_the_first_one_is_found_in_round_two(tmp_path):
     """popup-engine pair run (torsion on link 1 + payload): torsion alone absorbs the
     payload in round 1 (k_t 26 % low); in round 2 the payload screened beside it lands at
@@ -869,6 +879,8 @@ def test_diagnosis_raises_no_false_alarm_on_a_nominal_run(engine, tmp_path):
     assert oc["ok"], oc
 
 
+# minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
 def test_diagnosis_leaves_a_mujoco_disturbance_outside_the_library(tmp_path):
     pytest.importorskip("mujoco")
     sp = F.family_specs("disturbance", "mujoco", 1, 0, duration=10.0, channels="full", style="lab")[0]
@@ -876,3 +888,17 @@ def test_diagnosis_leaves_a_mujoco_disturbance_outside_the_library(tmp_path):
     oc = _diagnosed(path, truth)
     assert oc["ok"], oc
     json.dumps(oc)
+
+
+# in CI: the same disturbance against the library's quick candidates, on a shorter run (the
+# whole library on it takes minutes: the test above, with -m slow)
+def test_a_mujoco_disturbance_is_not_forced_onto_a_quick_candidate(tmp_path):
+    pytest.importorskip("mujoco")
+    sp = F.family_specs("disturbance", "mujoco", 1, 0, duration=6.0, channels="full", style="lab")[0]
+    path, truth = F.make_run(sp, tmp_path)
+    run = popup.read_run(path)
+    d = popup.diagnose(run.model(), run, effects=["joint_friction", "payload_mass", "sensor_delay", "air_drag", "pressure_leak"])
+    assert d.significant == [], d.to_pandas()[["effect", "significant", "score", "error_after"]]
+    assert bench.NOT_EXPLAINED.search(d.conclusion), d.conclusion
+    # it says where the error is left: channels and a band or time window
+    assert "worst channels" in d.conclusion, d.conclusion

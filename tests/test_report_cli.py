@@ -14,7 +14,9 @@ import pytest
 import popup
 
 RUN = Path(__file__).resolve().parents[1] / "examples" / "data" / "lab_run"
-FAST = "payload_mass,joint_friction,backlash,sensor_delay"
+# the bundled run's two effects and a third candidate (backlash, with its compliant-flank
+# variant at a small step, doubled the fixture's time for the same answer: in benchmarks/)
+FAST = "payload_mass,joint_friction,sensor_delay"
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +138,8 @@ def test_rollout_count_is_the_number_of_simulations_run(monkeypatch):
         return res
 
     monkeypatch.setattr(popup.Model, "rollout", counting)  # Model.replay is a rollout of one
-    d = popup.diagnose(model, run, effects=["payload_mass", "higher_bending_modes"])
+    # every rollout of the nominal replay, the fits and the candidates' checks is counted
+    d = popup.diagnose(model, run, effects=["payload_mass", "sensor_delay"])
     assert d.n_rollouts == sum(counted)
     assert [s.n_rollouts for s in d.suspects] and all(s.n_rollouts > 2 for s in d.suspects)
 
