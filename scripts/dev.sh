@@ -25,10 +25,11 @@ case "${1:-}" in
     ;;
   test)
     setup
+    # the test-release profile (Cargo.toml): release optimisation, a quicker build
     if cargo nextest --version >/dev/null 2>&1; then
-      cargo nextest run --release --workspace --exclude popup-py --no-fail-fast
+      cargo nextest run --cargo-profile test-release --workspace --exclude popup-py --no-fail-fast
     else
-      cargo test --release --workspace --exclude popup-py
+      cargo test --profile test-release --workspace --exclude popup-py
     fi
     # one worker per core, each test file on one worker (its module fixtures built once)
     "$PY" -m pytest -q -n auto --dist loadfile
