@@ -138,10 +138,9 @@ def _within(fit, true, ci, rel=0.0):
     return bool(np.all(np.abs(fit - true) <= ci + rel * np.abs(true)))
 
 
-#: Every effect against the whole library runs with ``pytest -m slow``
-#: (benchmarks/slow_tests.sh), and on generated families in
-#: benchmarks/bench_diagnosis_families.py.
-IN_CI: set = set()
+# Every effect against the whole library runs with ``pytest -m slow``
+# (benchmarks/slow_tests.sh), and on generated families in
+# benchmarks/bench_diagnosis_families.py.
 #: In CI against the library's quick candidates only, with the effect itself (backlash,
 #: the bending modes and torsion are most of a whole-library diagnosis's time): torsion, a
 #: structural effect that needs its own step, and the delay. The others are in CI
@@ -154,7 +153,7 @@ QUICK = ["joint_friction", "payload_mass", "sensor_delay", "actuator_saturation"
 
 def _cases():
     for n in HIDDEN:
-        yield pytest.param(n, None, marks=() if n in IN_CI else pytest.mark.slow, id=n)
+        yield pytest.param(n, None, marks=pytest.mark.slow, id=n)
         yield pytest.param(n, QUICK + ([n] if n not in QUICK else []), marks=() if n in QUICK_CI else pytest.mark.slow,
                            id=f"{n}-quick-candidates")
 
