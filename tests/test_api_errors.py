@@ -119,3 +119,16 @@ def test_fit_params_arguments_are_named(run, kw, needle):
     with pytest.raises(popup.InputError, match=needle) as e:
         popup.fit_params(popup.Model(), run, **kw)
     assert isinstance(e.value, ValueError)
+
+
+def test_a_thread_count_beyond_64_bits_is_named():
+    # found by tests/test_fuzz_api.py: 2**64 threads ended as OverflowError inside the binding
+    with pytest.raises(popup.InputError, match="input threads: 18446744073709551616"):
+        popup.Model().rollout(duration=0.01, threads=2**64)
+
+
+def test_a_payload_the_springs_cannot_hold_names_the_payload():
+    # found by tests/test_fuzz_api.py: the statics' message said "payload 138 kg", not the
+    # argument's name
+    with pytest.raises(popup.PopupError, match=r"payload_kg = 138 kg"):
+        popup.Model().rollout(duration=0.0, payload_kg=138)

@@ -90,3 +90,16 @@ def test_payload_is_found_from_the_declared_start_by_multistart(tmp_path):
     # one start only (no seeds, no grid): the same problem, fitted from the declared payload
     one = popup.fit_params(nominal, run, ["payload_mass.delta_kg"], seeds=False, starts=1)
     assert one.nfev < res.nfev
+
+
+def test_max_iter_zero_evaluates_the_start_without_moving_it(tmp_path):
+    """Found by tests/test_fuzz_api.py: ``max_iter=0`` reached scipy as ``max_nfev=0`` and
+    raised its ValueError. It means: evaluate the start, report it, do not iterate."""
+    nominal = popup.Model("popup-lab", payload_kg=1.0)
+    t, q = popup.synth.lab_trajectory(6.0, rate=250.0, seed=4)
+    run = popup.synth.measured_run(nominal.with_effect("payload_mass", delta_kg=0.5), t, q, tmp_path / "payload", seed=4)
+    res = popup.fit_params(nominal, run, ["payload_mass.delta_kg"], max_iter=0, seeds=False, starts=1)
+    assert res.params["payload_mass.delta_kg[0]"] == 0.0  # the declared start, not moved
+    assert res.error == pytest.approx(res.error_before)
+    moved = popup.fit_params(nominal, run, ["payload_mass.delta_kg"], max_iter=5, seeds=False, starts=1)
+    assert moved.params["payload_mass.delta_kg[0]"] != 0.0

@@ -256,6 +256,8 @@ def fit(
         def jac(x: np.ndarray) -> np.ndarray:
             return _jac(np.asarray(x, dtype=float), w)
 
+        if nfev <= 0:  # max_iter = 0: the start is evaluated, not moved
+            return x_start
         sol = least_squares(fun, x_start, jac=jac, bounds=(lo, hi), x_scale=sc, method="trf", max_nfev=nfev, xtol=1e-6, ftol=1e-6, gtol=1e-8)
         return np.asarray(sol.x, dtype=float)
 
@@ -281,7 +283,7 @@ def fit(
     x = solve(x0, w, max_iter)
     ms1, _, _ = prob.channel_stats(eval_batch([x])[0], train)
     w1 = _weights(ms1)
-    if np.all(np.isfinite(ms1)) and np.any(np.abs(np.log(w1 / w)) > math.log(2.0)):
+    if max_iter > 0 and np.all(np.isfinite(ms1)) and np.any(np.abs(np.log(w1 / w)) > math.log(2.0)):
         w = w1
         x = solve(x, w, max(5, max_iter // 2))
     # never worse than the start as given: the nudge off a bound moves an entry by a fifth
@@ -355,7 +357,9 @@ def log_ratio(prob: ReplayProblem, z_before: np.ndarray, z_after: np.ndarray, ma
     if not (np.all(np.isfinite(ms0)) and np.all(np.isfinite(ms1))):
         return -math.inf, float(np.sum(n))
     ne = n_eff(n, rho)
-    lr = float(np.sum(ne * np.log(np.maximum(ms0, 1e-300) / np.maximum(ms1, 1e-300))))
+    # two logarithms, not the log of a ratio: a channel recorded without noise (a simulator's
+    # exact pressure) and replayed exactly has ms = 0, and ms0/1e-300 overflows
+    lr = float(np.sum(ne * (np.log(np.maximum(ms0, 1e-300)) - np.log(np.maximum(ms1, 1e-300)))))
     return lr, max(float(np.sum(ne)), 1.0)
 
 

@@ -266,6 +266,8 @@ def fit_params(
     channels, sample_rate : as :func:`popup.compare.compare`.
     initial_q, initial_v : the initial state (chain coordinates and rates, (nv,)); default
         from the run (at rest, or its ``[initial]`` table).
+    max_iter : solver evaluations per start (0: the starts are evaluated, not moved; the
+        result is the best start with its intervals).
     seeds : also start from the effects' seed points (:data:`popup.estimate.SEEDS`);
         every start is simulated in one batch.
     starts : the best ``starts`` starts are each fitted; the best fit is kept and

@@ -172,6 +172,8 @@ def _duration(x: Any) -> float:
 def _threads(x: Any) -> int:
     if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, np.integer)):
         raise InputError(f"input threads: expected an integer (0 = all cores), got {x!r}")
+    if not -(2**63) <= int(x) < 2**63:  # the core takes a 64-bit count and refuses absurd ones itself
+        raise InputError(f"input threads: {int(x)} is not a thread count (0 = all cores, or 1 up to a few times the machine's cores)")
     return int(x)
 
 

@@ -969,9 +969,9 @@ def sweep(
         bad = [c for c in ser_names if c not in _CH and c not in _CC]
         if bad or not ser_names:
             raise SweepError(f"series: unknown channel(s) {bad}; channels are {_SERIES_CHANNELS}")
-    if not isinstance(threads, int) or threads < 0:
+    if not isinstance(threads, int) or not 0 <= threads < 2**63:
         raise SweepError(f"threads must be an integer >= 0 (0 = all cores), got {threads!r}")
-    if not isinstance(threads_per_worker, int) or threads_per_worker < 0:
+    if not isinstance(threads_per_worker, int) or not 0 <= threads_per_worker < 2**63:
         raise SweepError(f"threads_per_worker must be an integer >= 0, got {threads_per_worker!r}")
     if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) or batch_size < 1):
         raise SweepError(f"batch_size must be an integer >= 1, got {batch_size!r}")

@@ -123,7 +123,7 @@ pub fn static_equilibrium(model: &Model, pd: &ParamData, q: &VecN) -> Result<Vec
     Err(Error::NoConvergence {
         what: "static equilibrium".into(),
         message: format!(
-            "Newton iteration on the passive joints did not converge (payload {} kg, pressures {:?} Pa): the springs may be too weak for the load",
+            "Newton iteration on the passive joints did not converge (payload_kg = {} kg, pressure_pa = {:?} Pa): the springs may be too weak for the load",
             pd.params.payload_kg, pd.params.pressure_pa
         ),
     })
