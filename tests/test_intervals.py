@@ -67,3 +67,24 @@ def test_the_jackknife_covers_what_the_gauss_newton_covariance_assumes_away():
     # channel) under-covers, the jackknife brings the level back
     assert gn < 0.82, gn
     assert both >= 0.9 and both - gn >= 0.1, (gn, both)
+
+
+def test_the_likelihood_ratio_is_finite_when_a_noise_free_channel_is_replayed_exactly():
+    """Found by the slow pressure-leak test: the popup engine writes p1 p2 without noise, the
+    fitted leak replays them exactly (mean square 0), and ln(ms0/ms1) overflowed (a
+    RuntimeWarning, an error under pytest, so the leak was reported "not tested")."""
+
+    class Stats:  # the part of a ReplayProblem that log_ratio reads
+        def channel_stats(self, z, mask):
+            ms = np.mean(np.asarray(z)[mask] ** 2, axis=0)
+            return ms, np.full(ms.shape, float(mask.sum())), np.zeros(ms.shape)
+
+    n = 400
+    rng = np.random.default_rng(0)
+    mask = np.ones(n, dtype=bool)
+    before = np.column_stack([rng.normal(0, 2.0, n), np.full(n, 3e9)])  # p channel 3e9 noise units off
+    after = np.column_stack([rng.normal(0, 1.0, n), np.zeros(n)])  # ... and exact after the fit
+    lr, ne = est.log_ratio(Stats(), before, after, mask)
+    assert np.isfinite(lr) and lr > 0 and ne == 2 * n
+    expected = n * (np.log(np.mean(before[:, 0] ** 2)) - np.log(np.mean(after[:, 0] ** 2))) + n * (np.log(9e18) - np.log(1e-300))
+    assert lr == pytest.approx(expected, rel=1e-12)
