@@ -132,3 +132,12 @@ def test_a_payload_the_springs_cannot_hold_names_the_payload():
     # argument's name
     with pytest.raises(popup.PopupError, match=r"payload_kg = 138 kg"):
         popup.Model().rollout(duration=0.0, payload_kg=138)
+
+
+@pytest.mark.parametrize("call", ["diagnose", "improve"])
+@pytest.mark.parametrize("max_iter", [-1, 2.5, True, 10**7])
+def test_a_bad_max_iter_is_refused_before_any_work(run, call, max_iter):
+    # a negative count reached scipy's least_squares inside every candidate's guarded fit,
+    # so each effect was listed "not tested" instead of the argument being named
+    with pytest.raises(popup.InputError, match="input max_iter"):
+        getattr(popup, call)(popup.Model(), run, max_iter=max_iter)
