@@ -1276,7 +1276,7 @@ def diagnose(
     ``screen=1`` for the swap and base-law steps, which take only the best candidate).
     """
     t_start = time.perf_counter()
-    _check_max_iter(max_iter)
+    est.check_max_iter(max_iter)
     names = list(fx.EFFECT_NAMES if effects is None else effects)
     for n in names:
         fx.normalize(n, {})
@@ -1372,12 +1372,6 @@ def diagnose(
     return d
 
 
-def _check_max_iter(max_iter: Any) -> None:
-    """Refuse a ``max_iter`` that is not a count of solver evaluations (0 = starts only)."""
-    if isinstance(max_iter, (bool, np.bool_)) or not isinstance(max_iter, (int, np.integer)) or not 0 <= max_iter <= 10**6:
-        raise InputError(f"input max_iter: expected an integer from 0 to 1000000 (solver evaluations per start), got {max_iter!r}")
-
-
 def _round_conclusion(d: Diagnosis) -> str:
     b = d.best
     parts = []
@@ -1454,7 +1448,7 @@ def improve(
         fx.normalize(n, {})  # bad input is refused before any work
     if int(max_rounds) < 0:
         raise InputError(f"input max_rounds: {max_rounds} must be ≥ 0")
-    _check_max_iter(max_iter)
+    est.check_max_iter(max_iter)
     prob = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads))
     steps = [_step(prob, [], {}, 0)]
     noise0 = prob.noise

@@ -63,6 +63,8 @@ __all__ = [
     "n_eff",
     "SCORE_THRESHOLD",
     "uncertainty",
+    "MAX_ITER_LIMIT",
+    "check_max_iter",
 ]
 
 #: Typical magnitude of each fitted parameter (finite-difference steps and x_scale).
@@ -185,6 +187,18 @@ def params_dict(effect: str, flat: np.ndarray) -> Dict[str, List[float]]:
 
 def _weights(ms: np.ndarray) -> np.ndarray:
     return 1.0 / np.sqrt(np.maximum(np.where(np.isfinite(ms), ms, 1.0), 1.0))
+
+
+MAX_ITER_LIMIT = 10**6
+"""Most solver evaluations per start a caller may ask for (``max_iter``)."""
+
+
+def check_max_iter(max_iter: Any) -> int:
+    """``max_iter`` as an int: a count of solver evaluations per start from 0 (the starts
+    evaluated, not moved) to :data:`MAX_ITER_LIMIT`; anything else is an InputError naming it."""
+    from .model import check_count
+
+    return check_count("max_iter", max_iter, 0, MAX_ITER_LIMIT, "solver evaluations per start")
 
 
 def fit(

@@ -89,7 +89,7 @@ def _check_args(
 ) -> Tuple[Optional[List[str]], Optional[float]]:
     """Refuse arguments of the wrong kind with an InputError naming the argument (before
     anything is simulated); return ``channels`` and ``sample_rate`` normalised."""
-    from .model import _names, _scalar, _threads
+    from .model import _names, _scalar, _threads, check_count
 
     if not isinstance(params, str):
         _names("params", params)
@@ -99,9 +99,8 @@ def _check_args(
         for k in d or {}:
             if not isinstance(k, str):
                 raise InputError(f"input {what}: key {k!r} is not a parameter name ('effect.name[i]')")
-    for name, v, lo, hi in (("max_iter", max_iter, 0, 10**6), ("starts", starts, 1, 10**3)):
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
-            raise InputError(f"input {name}: expected an integer from {lo} to {hi}, got {v!r}")
+    est.check_max_iter(max_iter)
+    check_count("starts", starts, 1, 10**3)
     _threads(threads)
     ch = None if channels is None else _names("channels", channels)
     rate = None

@@ -177,6 +177,14 @@ def _threads(x: Any) -> int:
     return int(x)
 
 
+def check_count(what: str, x: Any, lo: int, hi: int, meaning: str = "") -> int:
+    """``x`` as an int, refused with an :class:`InputError` naming input ``what`` unless it is
+    an integer (not a bool) from ``lo`` to ``hi``; ``meaning`` says what it counts."""
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, np.integer)) or not lo <= x <= hi:
+        raise InputError(f"input {what}: expected an integer from {lo} to {hi}{f' ({meaning})' if meaning else ''}, got {x!r}")
+    return int(x)
+
+
 def _rate(x: Any) -> float:
     r = _scalar("sample_rate", x, "Hz")
     if not (math.isfinite(r) and r > 0):
