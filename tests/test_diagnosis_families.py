@@ -632,10 +632,11 @@ def test_an_effect_fitted_to_a_coarse_encoders_replay_error_is_not_a_finding(tmp
 def test_a_play_narrower_than_the_encoders_readings_is_not_a_finding(tmp_path):
     """A MuJoCo nominal run with 14-bit encoders and quiet sensors (noise × 0.45): its servos
     let the held motors yield to the links by a fraction of a reading. Before popup.unseen a
-    backlash with µrad gaps fitted that (a likelihood ratio above 10 × the threshold) and the
-    play rule refused it. With the servo's motion in the replay the run is at its floor and
-    the backlash, fitted anyway, explains nothing (score below the threshold) and its gaps
-    are still refused; the rule passes a play three readings wide."""
+    backlash with µrad gaps fitted that (a likelihood ratio above 10 × the threshold) and a
+    play rule of two readings refused it. With the servo's motion in the replay the run is
+    at its floor and the backlash, fitted anyway, explains nothing (score below the
+    threshold) and its gaps are below half a reading (PLAY_READINGS); the rule passes a
+    play that one joint has."""
     from popup import diagnosis as dg
     from popup import effects as fx
 
@@ -647,12 +648,13 @@ def test_a_play_narrower_than_the_encoders_readings_is_not_a_finding(tmp_path):
     w = d.problem.encoder_width
     assert np.allclose(w, F.encoder_resolution(14), rtol=0.02), w
     assert not s.significant and d.best is None and s.score < dg.SCORE_THRESHOLD, (s.score, s.message)
-    assert "narrower than 2 encoder readings" in s.message, s.message
+    assert np.all(np.asarray(s.params["gap"]) < dg.PLAY_READINGS * w), s.params
+    assert f"narrower than {dg.PLAY_READINGS:g} encoder readings" in s.message, s.message
     flat = run.model().effects_flat.copy()
     sl = fx.EFFECTS["backlash"].params["gap"].slice
-    flat[sl] = 3.0 * w
+    flat[sl] = [0.0, 0.0, 1.1 * dg.PLAY_READINGS * w[2]]  # one joint's play is enough
     assert dg._unresolved_play(d.problem, "backlash", flat) == ""
-    flat[sl] = 1.5 * w
+    flat[sl] = 0.9 * dg.PLAY_READINGS * w
     assert "narrower" in dg._unresolved_play(d.problem, "backlash", flat)
 
 
@@ -723,7 +725,7 @@ def test_a_servos_motion_inside_a_reading_is_part_of_the_replay(tmp_path):
 
 def test_the_backward_step_applies_the_rules_that_add_an_effect(tmp_path):
     """An effect added earlier is dropped when the model without it is at its floor, or when
-    it is a play narrower than two readings; an effect the run has is kept. popup-engine
+    it is a play narrower than PLAY_READINGS; an effect the run has is kept. popup-engine
     payload run (12-bit encoders): the truth plus a stand-in backlash."""
     from popup import diagnosis as dg
     from popup.problem import ReplayProblem
@@ -741,8 +743,8 @@ def test_the_backward_step_applies_the_rules_that_add_an_effect(tmp_path):
     assert dg._unresolved_play(prob, "backlash", m.effects_flat) == ""
     assert dg._model_at_floor(base, *base.error())
     assert not dg._still_needed(prob, "backlash", ["gap"])
-    # a play narrower than two readings is not needed, whatever the likelihood says
-    m2 = true_model.with_effects({"backlash": {"gap": (1.5 * w).tolist()}})
+    # a play narrower than PLAY_READINGS is not needed, whatever the likelihood says
+    m2 = true_model.with_effects({"backlash": {"gap": (0.8 * dg.PLAY_READINGS * w).tolist()}})
     assert not dg._still_needed(base.with_model(m2), "backlash", ["gap"])
     # the payload itself is needed
     assert dg._still_needed(base, "payload_mass", ["delta_kg"])
