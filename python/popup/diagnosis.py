@@ -1497,10 +1497,18 @@ def improve(
                 lw = None
                 if added and not _at_floor(steps[-1], prob):
                     for e in list(added):
-                        # as for the swap: the effect the extras stood in for was significant alone
-                        pool = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects)]
+                        # first the candidates significant in some round (screened from their
+                        # fits); then the rest of the library, each fitted from its seeds: an
+                        # effect whose error the extras took may show only beside the base law
+                        # (a soft torsion with a payload: each alone replays worse than neither,
+                        # MuJoCo pair, benchmarks/README.md session 23)
+                        sig = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects)]
+                        rest = [c for c in (effects or fx.EFFECT_NAMES) if c not in added and c not in sig]
                         stage, stage_round = f"{e} at its base law: ", rnd + 1
-                        lw = _try_base_law(prob, run, cprob, e, added, fitted_params, pool, diags, threads, max_iter, prog, notes) if pool else None
+                        for pool, prior in ((sig, diags), (rest, [])):
+                            lw = _try_base_law(prob, run, cprob, e, added, fitted_params, pool, prior, threads, max_iter, prog, notes) if pool else None
+                            if lw is not None:
+                                break
                         stage = ""
                         if lw is not None:
                             reset = e
