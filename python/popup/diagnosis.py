@@ -861,7 +861,7 @@ part of the replay (:mod:`popup.unseen`): a play of a quarter to one reading the
 for that motion on MuJoCo nominal runs with coarse encoders and quiet sensors. With the
 motion in the replay, twelve such runs (12- and 14-bit, trapezoid, lab and multisine, 200
 and 500 Hz, noise × 0.35) fitted with the rule off gave a play of 0 on 35 of 36 joints
-(0.11 reading on one, score below zero), while a MuJoCo run with a true play of 1.1-1.8
+(0.11 reading on one, score below zero; six popup-engine runs likewise, none significant), while a MuJoCo run with a true play of 1.1-1.8
 readings (12-bit, 200 Hz trapezoid) was refused by the old rule although the play took
 the error from 2.05 to 0.30 noise units, every channel to within 1.2 × its noise
 (benchmarks/README.md, session 23)."""
