@@ -1505,10 +1505,7 @@ def improve(
                         sig = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects)]
                         rest = [c for c in (effects or fx.EFFECT_NAMES) if c not in added and c not in sig]
                         stage, stage_round = f"{e} at its base law: ", rnd + 1
-                        for pool, prior in ((sig, diags), (rest, [])):
-                            lw = _try_base_law(prob, run, cprob, e, added, fitted_params, pool, prior, threads, max_iter, prog, notes) if pool else None
-                            if lw is not None:
-                                break
+                        lw = _try_base_law(prob, run, cprob, e, added, fitted_params, sig, diags, threads, max_iter, prog, notes, more=rest)
                         stage = ""
                         if lw is not None:
                             reset = e
@@ -1792,16 +1789,20 @@ def _extras(effect: str, names: Sequence[str]) -> List[str]:
 
 def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, added: List[str], fitted: Dict[str, List[str]],
                   effects: Optional[Sequence[str]], diags: Sequence[Diagnosis], threads: int, max_iter: int,
-                  progress: Optional[Progress], log: Optional[List[str]] = None) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+                  progress: Optional[Progress], log: Optional[List[str]] = None,
+                  more: Sequence[str] = ()) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
     """Whether ``effect``, added with a richer variant's extra parameters, is better back at
     its base law (the extras neutral) with another effect added: the added effects are
     refitted with ``effect`` at its base law, that model is diagnosed, and its best
     significant candidate added and refitted with them. Returned (the new effect, model,
     problem, intervals, fitted names and the diagnosis) when it beats the current model by
-    the significance threshold in BIC and lowers the held-out error too; else ``None``."""
+    the significance threshold in BIC and lowers the held-out error too; else ``None``.
+    The candidates ``effects`` are screened from their fits in ``diags``; if none is kept,
+    the candidates ``more`` are tried the same way, each fitted from its seeds."""
     extras = _extras(effect, fitted.get(effect, []))
-    pool = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
-    if not extras or not pool:
+    pool = [e for e in (fx.EFFECT_NAMES if effects is None else effects) if e not in added]
+    more = [e for e in more if e not in added and e not in pool]
+    if not extras or not (pool or more):
         return None
     what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(pool)})"
     try:
@@ -1820,7 +1821,11 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
     except Exception as ex:  # noqa: BLE001 - the current model stands
         _note(log, f"{what}: failed refitting at the base law ({type(ex).__name__}: {ex}); the model stands")
         return None
-    return _best_added(prob, run, pb, added, nf, pool, diags, threads, max_iter, progress, cprob, fitted, log=log, what=what)
+    out = _best_added(prob, run, pb, added, nf, pool, diags, threads, max_iter, progress, cprob, fitted, log=log, what=what) if pool else None
+    if out is None and more:
+        what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(more)}, each from its seeds)"
+        out = _best_added(prob, run, pb, added, nf, more, [], threads, max_iter, progress, cprob, fitted, log=log, what=what)
+    return out
 
 
 def _significant_in(diags: Sequence[Diagnosis]) -> List[str]:
