@@ -1259,6 +1259,7 @@ def diagnose(
     rank_at_floor: bool = False,
     starts: Optional[Mapping[str, Mapping[str, Sequence[float]]]] = None,
     screen: int = 0,
+    joint: bool = False,
 ) -> Diagnosis:
     """Rank every effect of the library (or ``effects``) by how much of the model's
     systematic error on ``run`` it explains, each fitted, validated on held-out samples,
@@ -1280,6 +1281,10 @@ def diagnose(
     fit, and at most ``screen`` are refitted jointly with ``refit``; the others keep their
     screened fit, saying so (as :func:`improve` does from its third round on, and with
     ``screen=1`` for the swap and base-law steps, which take only the best candidate).
+    ``joint``: every candidate is fitted jointly with ``refit`` from its seeds, with no fit
+    with those effects held first: for a candidate whose error an earlier effect's value
+    took, which a fit with that value held does not see (:func:`improve`'s base-law step
+    over the candidates never significant before).
     """
     t_start = time.perf_counter()
     est.check_max_iter(max_iter)
@@ -1314,7 +1319,7 @@ def diagnose(
     # only the JOINT_TOP best are refitted jointly (the refit's extra Jacobian columns are
     # most of a round's cost, and the ranking's tail does not need them)
     quick: Dict[str, Suspect] = {}
-    n_joint = min(JOINT_TOP, len(todo), screen or JOINT_TOP) if also else 0
+    n_joint = min(JOINT_TOP, len(todo), screen or JOINT_TOP) if also and not joint else 0
     if screen > 0 and starts:
         with_start = [n for n in todo if starts.get(n)]
         for i, name in enumerate(with_start):
@@ -1333,7 +1338,7 @@ def diagnose(
         if progress is not None:
             progress({"effect": name, "done": done0 + i, "total": total})
         evs.setdefault(name, _evidence(name, cmp, prob))
-        suspects.append(_try_effect(prob, name, evs[name], max_iter, None, (starts or {}).get(name)))
+        suspects.append(_try_effect(prob, name, evs[name], max_iter, also if joint and also else None, (starts or {}).get(name)))
     for name in todo:
         if name not in full:
             q = quick[name]
@@ -1727,19 +1732,21 @@ def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
 def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept: List[str], fitted: Dict[str, List[str]], pool: List[str],
                 diags: Sequence[Diagnosis], threads: int, max_iter: int,
                 progress: Optional[Progress], cur: ReplayProblem,
-                fitted_cur: Mapping[str, Sequence[str]], log: Optional[List[str]] = None, what: str = "") -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+                fitted_cur: Mapping[str, Sequence[str]], log: Optional[List[str]] = None, what: str = "",
+                joint: bool = False) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
     """The model of ``base`` with the best significant candidate among ``pool`` added (the
     candidates diagnosed with the effects ``kept``, fitted names ``fitted``, refitted with
     each; the best added and everything refitted jointly), if it beats the current model
     ``cur`` (:func:`_beats`). Returns (its name, the model, its problem with its own unseen
     motion, intervals, fitted names, the diagnosis), or ``None``: no candidate significant,
     the current model better, or a failure (the current model stands). ``log``: a line
-    saying what (``what``) was tried and why it was (not) kept is appended."""
+    saying what (``what``) was tried and why it was (not) kept is appended. ``joint``: as
+    :func:`diagnose`'s (every candidate fitted jointly with ``kept`` from its seeds)."""
     what = what or "candidates " + ", ".join(pool)
     try:
         # only the best candidate is taken: the cheap screen picks the one that gets the full fit
         d = diagnose(base.model, run, effects=pool, threads=threads, max_iter=max_iter, problem=base, progress=progress, refit=fitted,
-                     starts=_prior_fits(diags), screen=1)
+                     starts=_prior_fits(diags), screen=1, joint=joint)
         s = d.best
         if s is None:
             _note(log, f"{what}: no candidate significant; the model stands")
@@ -1798,7 +1805,9 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
     problem, intervals, fitted names and the diagnosis) when it beats the current model by
     the significance threshold in BIC and lowers the held-out error too; else ``None``.
     The candidates ``effects`` are screened from their fits in ``diags``; if none is kept,
-    the candidates ``more`` are tried the same way, each fitted from its seeds."""
+    the candidates ``more`` are tried, each fitted jointly with the added effects from its
+    seeds (their error was taken by the extras, and the effect's base-law value refitted
+    without them is off: a torsion fitted with that payload held finds nothing)."""
     extras = _extras(effect, fitted.get(effect, []))
     pool = [e for e in (fx.EFFECT_NAMES if effects is None else effects) if e not in added]
     more = [e for e in more if e not in added and e not in pool]
@@ -1823,8 +1832,8 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
         return None
     out = _best_added(prob, run, pb, added, nf, pool, diags, threads, max_iter, progress, cprob, fitted, log=log, what=what) if pool else None
     if out is None and more:
-        what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(more)}, each from its seeds)"
-        out = _best_added(prob, run, pb, added, nf, more, [], threads, max_iter, progress, cprob, fitted, log=log, what=what)
+        what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(more)}, each fitted with {', '.join(added)} from its seeds)"
+        out = _best_added(prob, run, pb, added, nf, more, [], threads, max_iter, progress, cprob, fitted, log=log, what=what, joint=True)
     return out
 
 
