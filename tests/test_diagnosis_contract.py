@@ -338,6 +338,29 @@ def test_a_candidate_refitted_with_the_added_effects_applies_them_as_refitted(no
     assert s.to_dict()["refitted"]["payload_mass"]["delta_kg"] == s.refitted["payload_mass"]["delta_kg"]
 
 
+def test_joint_fits_every_candidate_with_the_added_effects_from_its_seeds(nominal, tmp_path):
+    """``diagnose(joint=True)`` (the base-law step's candidates never significant before): each
+    candidate is fitted jointly with the effects of ``refit`` from its seeds, not first with
+    them held and then only the best :data:`JOINT_TOP` refitted. With four candidates the
+    plain diagnosis leaves one held; with ``joint`` every candidate carries the refitted
+    payload, and friction is found with the payload back at the truth."""
+    t, q = popup.synth.lab_trajectory(4.0, rate=250.0, seed=23)
+    truth = nominal.with_effect("payload_mass", delta_kg=0.3).with_effect("joint_friction", tau_c=[1.0, 1.5, 0.5], b=[0.2, 0.2, 0.1])
+    run = popup.synth.measured_run(truth, t, q, tmp_path, seed=23)
+    current = nominal.with_effect("payload_mass", delta_kg=0.2)
+    cands = ["joint_friction", "air_drag", "sensor_delay", "pressure_leak"]
+    assert len(cands) > dg.JOINT_TOP
+    held = dg.diagnose(current, run, effects=cands, refit={"payload_mass": ["delta_kg"]}, max_iter=8)
+    assert sum(bool(s.refitted) for s in held.suspects if s.tested) <= dg.JOINT_TOP < len(cands)
+    d = dg.diagnose(current, run, effects=cands, refit={"payload_mass": ["delta_kg"]}, max_iter=8, joint=True)
+    tested = [s for s in d.suspects if s.tested]
+    assert len(tested) == len(cands) and all("payload_mass" in s.refitted for s in tested), [(s.effect, s.refitted) for s in tested]
+    assert not any("refitted with payload_mass (score" in s.message for s in tested)  # no held fit came first
+    b = d.best
+    assert b is not None and b.effect == "joint_friction", [(s.effect, s.score) for s in d.suspects]
+    assert b.refitted["payload_mass"]["delta_kg"][0] == pytest.approx(0.3, abs=0.01), b.refitted
+
+
 # minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
 @pytest.mark.slow
 def test_the_swap_offers_only_candidates_some_round_found_significant(nominal, tmp_path, monkeypatch):
