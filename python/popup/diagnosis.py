@@ -1508,7 +1508,7 @@ def improve(
                         # (a soft torsion with a payload: each alone replays worse than neither,
                         # MuJoCo pair, benchmarks/README.md session 23)
                         sig = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects)]
-                        rest = [c for c in (effects or fx.EFFECT_NAMES) if c not in added and c not in sig]
+                        rest = [c for c in (fx.EFFECT_NAMES if effects is None else effects) if c not in added and c not in sig]
                         stage, stage_round = f"{e} at its base law: ", rnd + 1
                         lw = _try_base_law(prob, run, cprob, e, added, fitted_params, sig, diags, threads, max_iter, prog, notes, more=rest)
                         stage = ""
@@ -1813,7 +1813,7 @@ def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, e
     more = [e for e in more if e not in added and e not in pool]
     if not extras or not (pool or more):
         return None
-    what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(pool)})"
+    what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(pool or more)})"
     try:
         params = dict(cprob.model.effects.get(effect, {}))
         params.update({k: [fx.EFFECTS[effect].params[k].neutral] * fx.EFFECTS[effect].params[k].length for k in extras})
