@@ -13,6 +13,9 @@ import pytest
 
 import popup
 from popup import diagnosis as dg
+from popup.diagnosis import candidate as dgc
+from popup.diagnosis import loop as dgl
+from popup.diagnosis import rules as dgr
 from popup.io import write_run
 
 FRICTION = {"tau_c": [1.2, 1.8, 0.6], "b": [0.2, 0.3, 0.1], "tau_s": [0.8, 1.0, 0.4], "v_s": [0.05, 0.05, 0.05]}
@@ -96,7 +99,7 @@ def test_a_stiffer_root_is_fitted_as_the_cantilever_split(nominal, tmp_path):
 def test_a_refit_beyond_the_step_is_rerun_at_a_smaller_step(nominal, friction_run, monkeypatch):
     """A joint refit that moves a stiffness beyond what the candidate's step was chosen for
     fails the step check: the refit is repeated at half the step, not the whole round lost."""
-    orig = dg._refit
+    orig = dgl._refit
     seen = []
 
     def stiff(prob, *a, **kw):
@@ -105,7 +108,7 @@ def test_a_refit_beyond_the_step_is_rerun_at_a_smaller_step(nominal, friction_ru
             raise popup.StepTooLargeError("time step dt = 1e-3 s is too large (injected)")
         return orig(prob, *a, **kw)
 
-    monkeypatch.setattr(dg, "_refit", stiff)
+    monkeypatch.setattr(dgl, "_refit", stiff)
     h = dg.improve(nominal, friction_run, effects=["joint_friction"], max_rounds=1)
     assert h.complete and h.effects == ["joint_friction"], h.error
     assert seen[:2] == [pytest.approx(1e-3), pytest.approx(0.5e-3)]
@@ -123,10 +126,11 @@ def test_a_failing_round_keeps_what_finished(nominal, friction_run, monkeypatch,
             raise popup.StepTooLargeError("time step dt = 1e-3 s is too large (injected)")
         return orig(*a, **kw)
 
-    monkeypatch.setattr(dg, "diagnose", flaky)
+    monkeypatch.setattr(dgl, "diagnose", flaky)  # the loop's rounds
     # friction alone brings this run to its noise floor, where the loop stops: switch that
     # stop off so that a second round runs (and fails)
-    monkeypatch.setattr(dg, "FLOOR_MULTIPLE", 0.0)
+    for mod in (dgr, dg.rank, dg.conclusion):
+        monkeypatch.setattr(mod, "FLOOR_MULTIPLE", 0.0)
     h = dg.improve(nominal, friction_run, effects=["joint_friction", "payload_mass"], max_rounds=3)
     assert not h.complete and "round 2 failed: StepTooLargeError" in h.error
     assert h.effects == ["joint_friction"] and len(h.steps) == 2 and len(h.diagnoses) == 1
@@ -144,14 +148,14 @@ def test_a_failing_round_keeps_what_finished(nominal, friction_run, monkeypatch,
 
 
 def test_an_effect_that_cannot_be_tried_is_named(nominal, friction_run, monkeypatch):
-    orig = dg._fit_candidate
+    orig = dgc._fit_candidate
 
     def broken(prob, name, *a, **kw):
         if name == "backlash":
             raise popup.StepTooLargeError("injected for backlash")
         return orig(prob, name, *a, **kw)
 
-    monkeypatch.setattr(dg, "_fit_candidate", broken)
+    monkeypatch.setattr(dgc, "_fit_candidate", broken)
     seen = []
     d = dg.diagnose(nominal, friction_run, effects=["backlash", "payload_mass"], progress=seen.append)
     s = d["backlash"]
@@ -197,7 +201,7 @@ def test_a_small_bite_of_a_misfit_is_not_significant_however_large_its_likelihoo
     out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=after, J=np.zeros((1, 1)),
                                     weights=np.ones(z0.shape[1]), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
     free = popup.estimate.free_params("payload_mass")
-    f = dg._Fitted("payload_mass", "", prob, base, free, out)
+    f = dgc._Fitted("payload_mass", "", prob, base, free, out)
     assert f.score > 100 * dg.SCORE_THRESHOLD and f.lr_val > 0 and f.v1 < f.v0  # huge and confirmed on held-out samples
     assert f.explained == pytest.approx(1 - kept**2, abs=0.05)
     assert f.significant == (f.explained >= dg.MIN_EXPLAINED)
@@ -239,7 +243,7 @@ def test_isolated_spikes_are_named_where_the_error_is_left(nominal, friction_run
 def test_held_out_samples_an_effect_does_not_act_on_neither_confirm_nor_refute_it():
     """A torque limit reached only in training blocks leaves the held-out residual exactly as
     it was: that is 'silent', not a refutation; any change there, or a failed run (NaN), is not."""
-    from popup.diagnosis import _silent_on
+    from popup.diagnosis.candidate import silent_on as _silent_on
 
     rng = np.random.default_rng(3)
     z0 = rng.standard_normal((200, 4))
@@ -268,7 +272,7 @@ def test_the_cheap_screen_fully_fits_only_its_best_and_still_finds_the_effect(no
     run = popup.synth.measured_run(truth, t, q, tmp_path, seed=21)
     cands = ["joint_friction", "air_drag", "sensor_delay"]
     d1 = dg.diagnose(nominal, run, effects=cands + ["payload_mass"])
-    starts = dg._prior_fits([d1])
+    starts = dgl._prior_fits([d1])
     assert set(cands) <= set(starts)
     with_payload = nominal.with_effect("payload_mass", delta_kg=0.3)
     full = dg.diagnose(with_payload, run, effects=cands, starts=starts)
@@ -374,17 +378,17 @@ def test_the_swap_offers_only_candidates_some_round_found_significant(nominal, t
              .with_effect("sensor_delay", imu=[0.001]))
     run = popup.synth.measured_run(truth, t, q, tmp_path, seed=23)
     offered = []
-    real = dg._try_swap
+    real = dgl._try_swap
 
     def spy(prob, run_, cprob, effect, added, fitted, pool, *rest):
         offered.append((effect, list(pool), list(added)))
         return real(prob, run_, cprob, effect, added, fitted, pool, *rest)
 
-    monkeypatch.setattr(dg, "_try_swap", spy)
+    monkeypatch.setattr(dgl, "_try_swap", spy)
     h = dg.improve(nominal, run, effects=["payload_mass", "joint_friction", "air_drag", "wrinkling"], max_rounds=2)
     assert not h.error, h.error
     assert set(h.effects) == {"payload_mass", "joint_friction"}
-    sig = dg._significant_in(h.diagnoses)
+    sig = dgl._significant_in(h.diagnoses)
     assert len(sig) > 2, sig  # stand-ins were significant in round 1: there is something to swap in
     assert offered, "no swap was tried"
     pairs = [(e, c) for e, pool, _ in offered for c in pool]
@@ -428,16 +432,16 @@ def test_noise_floors_a_large_misfit_biased_are_re_estimated_as_the_model_improv
         assert new[c] == pytest.approx(true[c], rel=0.15), (c, new[c], true[c])
     e, per = cp.error()
     assert e > 1.0  # the truth looks far from its floor in the biased units
-    off = dg._noise_recheck(cp)
+    off = dgl._noise_recheck(cp)
     up = {c for c, r in off.items() if r > 1.5}
     assert len(up) >= 2 and up <= set(imu), off  # the coloured channels found back up
-    st0 = dg._step(cp, ["payload_mass"], {}, 1)
-    assert not dg._at_floor(st0, cp)  # in the first floors the truth is not at its floor: the loop would go on
+    st0 = dgl._step(cp, ["payload_mass"], {}, 1)
+    assert not dg.results.step_at_floor(st0, cp)  # in the first floors the truth is not at its floor: the loop would go on
     st = st0.in_floors(off)
     assert st.error < 0.3 and max(st.channel_error.values()) < 1.2, st.channel_error
     # floors estimated from the right model: nothing to re-estimate
     pt = ReplayProblem(truth, run, threads=0)
-    assert dg._noise_recheck(pt) == {}
+    assert dgl._noise_recheck(pt) == {}
     # the loop re-estimates them on the refitted model and decides in them: at the floor
     # after round 1, no second round is diagnosed (in the first floors the truth sits at
     # S > 1, above the floor, and the other candidates would be tried)

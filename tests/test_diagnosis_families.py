@@ -653,9 +653,9 @@ def test_a_play_narrower_than_the_encoders_readings_is_not_a_finding(tmp_path):
     flat = run.model().effects_flat.copy()
     sl = fx.EFFECTS["backlash"].params["gap"].slice
     flat[sl] = [0.0, 0.0, 1.1 * dg.PLAY_READINGS * w[2]]  # one joint's play is enough
-    assert dg._unresolved_play(d.problem, "backlash", flat) == ""
+    assert dg.candidate.unresolved_play(d.problem, "backlash", flat) == ""
     flat[sl] = 0.9 * dg.PLAY_READINGS * w
-    assert "narrower" in dg._unresolved_play(d.problem, "backlash", flat)
+    assert "narrower" in dg.candidate.unresolved_play(d.problem, "backlash", flat)
 
 
 def _coarse_trapezoids(engine, n, seed, tmp_path):
@@ -688,7 +688,7 @@ def test_a_servos_motion_inside_a_reading_is_part_of_the_replay(tmp_path):
     for i, run in enumerate(runs):
         p = ReplayProblem(run.model(), run, threads=1)
         e0, per0 = p.error()
-        assert not dg._model_at_floor(p, e0, per0), per0  # above its floor as the readings are
+        assert not dg.rules.model_at_floor(p, e0, per0), per0  # above its floor as the readings are
         q = fit_unseen_motion(p)
         c = q.compliance
         assert c.any() and np.all(c >= 0), c
@@ -701,7 +701,7 @@ def test_a_servos_motion_inside_a_reading_is_part_of_the_replay(tmp_path):
         assert np.array_equal(q.q_enc, p.q_enc + q.q_corr)
         e1, per1 = q.error()
         assert e1 < 0.7 * e0, (e0, e1)
-        to_floor += dg._model_at_floor(q, e1, per1)
+        to_floor += dg.rules.model_at_floor(q, e1, per1)
         if i == 0:
             d = popup.diagnose(run.model(), run, effects=["payload_mass", "wrinkling"], threads=1)
             assert d.problem.compliance.tolist() == c.tolist() and d.model_at_floor and d.best is None, d.conclusion
@@ -740,15 +740,15 @@ def test_the_backward_step_applies_the_rules_that_add_an_effect(tmp_path):
     # a resolvable play (3 readings) the truth does not need: the model without it is at its floor
     m = true_model.with_effects({"backlash": {"gap": (3.0 * w).tolist()}})
     prob = base.with_model(m)
-    assert dg._unresolved_play(prob, "backlash", m.effects_flat) == ""
-    assert dg._model_at_floor(base, *base.error())
-    assert not dg._still_needed(prob, "backlash", ["gap"])
+    assert dg.candidate.unresolved_play(prob, "backlash", m.effects_flat) == ""
+    assert dg.rules.model_at_floor(base, *base.error())
+    assert not dg.loop._still_needed(prob, "backlash", ["gap"])
     # a play narrower than PLAY_READINGS is not needed, whatever the likelihood says
     m2 = true_model.with_effects({"backlash": {"gap": (0.8 * dg.PLAY_READINGS * w).tolist()}})
-    assert not dg._still_needed(base.with_model(m2), "backlash", ["gap"])
+    assert not dg.loop._still_needed(base.with_model(m2), "backlash", ["gap"])
     # the payload itself is needed
-    assert dg._still_needed(base, "payload_mass", ["delta_kg"])
-    assert "narrower" in dg._unresolved_play(base.with_model(m2), "backlash", m2.effects_flat)  # the rule that dropped it
+    assert dg.loop._still_needed(base, "payload_mass", ["delta_kg"])
+    assert "narrower" in dg.candidate.unresolved_play(base.with_model(m2), "backlash", m2.effects_flat)  # the rule that dropped it
 
 
 # minutes of fitting: with -m slow (benchmarks/slow_tests.sh)
@@ -769,14 +769,14 @@ def test_the_swap_step_replaces_an_effect_that_stood_in_for_a_missing_one(tmp_pa
     run = _read(path)
     m0 = run.model()
     prob = fit_unseen_motion(ReplayProblem(m0, run, threads=0))
-    s = dg._try_effect(prob, "wrinkling", {}, 15)
+    s = dg.candidate.try_effect(prob, "wrinkling", {}, 15)
     assert s.significant  # a stand-in: the run has no wrinkling
     fitted = {"wrinkling": list(s.fitted), "payload_mass": ["delta_kg"]}
-    _, cur, _ = dg._refit_stable(prob.with_model(s.apply(m0).with_effects({"payload_mass": {"delta_kg": 0.05}})), ["wrinkling", "payload_mass"], fitted, 15)
+    _, cur, _ = dg.loop._refit_stable(prob.with_model(s.apply(m0).with_effects({"payload_mass": {"delta_kg": 0.05}})), ["wrinkling", "payload_mass"], fitted, 15)
     cur = fit_unseen_motion(cur)
-    assert dg._still_needed(cur, "wrinkling", fitted["wrinkling"])
+    assert dg.loop._still_needed(cur, "wrinkling", fitted["wrinkling"])
     log = []
-    sw = dg._try_swap(prob, run, cur, "wrinkling", ["wrinkling", "payload_mass"], fitted, ["wrinkling", "payload_mass", "air_drag"], [], 0, 15, None, log)
+    sw = dg.loop._try_swap(prob, run, cur, "wrinkling", ["wrinkling", "payload_mass"], fitted, ["wrinkling", "payload_mass", "air_drag"], [], 0, 15, None, log)
     assert sw is not None
     assert len(log) == 1 and log[0].startswith("swap of wrinkling (candidates air_drag): air_drag kept (BIC gain"), log
     new, model, nprob, _, nf = sw
@@ -787,7 +787,7 @@ def test_the_swap_step_replaces_an_effect_that_stood_in_for_a_missing_one(tmp_pa
     assert "wrinkling" not in model.effects
     # the true model is not swapped away: no candidate left beats it
     log = []
-    assert dg._try_swap(prob, run, nprob, "payload_mass", ["air_drag", "payload_mass"], nf, ["wrinkling", "payload_mass", "air_drag"], [], 0, 15, None, log) is None
+    assert dg.loop._try_swap(prob, run, nprob, "payload_mass", ["air_drag", "payload_mass"], nf, ["wrinkling", "payload_mass", "air_drag"], [], 0, 15, None, log) is None
     assert len(log) == 1 and log[0].startswith("swap of payload_mass (candidates wrinkling): ") and ("the model stands" in log[0] or "not kept" in log[0]), log
 
 
@@ -837,14 +837,14 @@ def test_a_richer_law_standing_in_for_a_missing_effect_is_set_back(tmp_path):
     run = _read(path)
     m0 = run.model()
     prob = fit_unseen_motion(ReplayProblem(m0, run, threads=0))
-    s = dg._try_effect(prob, "payload_mass", {}, 15)
+    s = dg.candidate.try_effect(prob, "payload_mass", {}, 15)
     assert s.variant == "centre-of-mass offset"
     fitted = {"payload_mass": list(s.fitted)}
-    _, cur, _ = dg._refit_stable(prob.with_model(s.apply(m0)), ["payload_mass"], fitted, 15)
+    _, cur, _ = dg.loop._refit_stable(prob.with_model(s.apply(m0)), ["payload_mass"], fitted, 15)
     cur = fit_unseen_motion(cur)
-    t = dg._try_effect(cur, "torsion", {}, 15)  # round 2's screening: the payload held
+    t = dg.candidate.try_effect(cur, "torsion", {}, 15)  # round 2's screening: the payload held
     assert not t.significant
-    lw = dg._try_base_law(prob, run, cur, "payload_mass", ["payload_mass"], fitted, ["payload_mass", "torsion", "air_drag"], [], 0, 15, None)
+    lw = dg.loop._try_base_law(prob, run, cur, "payload_mass", ["payload_mass"], fitted, ["payload_mass", "torsion", "air_drag"], [], 0, 15, None)
     assert lw is not None and lw[0] == "torsion"
     model = lw[1]
     assert lw[2].error()[0] < 0.1 * cur.error()[0]

@@ -96,7 +96,8 @@ def test_history_and_diagnosis_objects_plot_and_tabulate():
 
 def test_history_names_swaps_removals_and_a_law_set_back():
     """The history's table and conclusion say what each step of the loop changed."""
-    from popup.diagnosis import History, HistoryStep, _conclude
+    from popup.diagnosis import History, HistoryStep
+    from popup.diagnosis.conclusion import conclude as _conclude
 
     ch = {"tau1": 1.0}
     steps = [

@@ -1,0 +1,448 @@
+"""One candidate effect fitted to a run: its starts, step and horizons, its richer variants
+and combinations, its joint refit with the effects already added, and the test that makes
+it significant (the package docs)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
+
+import numpy as np
+
+from .. import effects as fx
+from .. import estimate as est
+from ..problem import ReplayProblem
+from .rules import COORDINATE_SEEDS, COORDINATE_STEP, MIN_EXPLAINED, MIN_ITER, PLAY_PARAMS, PLAY_READINGS, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S, STABILITY_MARGIN, STIFFEST, STRUCTURE, VARIANTS
+from .results import Suspect, fmt_list
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..model import Model
+
+
+def _x0(prob: ReplayProblem, free: List[Tuple[fx.EffectParam, int]], base_flat: np.ndarray) -> np.ndarray:
+    x0 = []
+    for p, i in free:
+        v = base_flat[p.offset + i]
+        if p.effect == "actuator_saturation":
+            c = f"tau{i + 1}"
+            if c in prob.channels:
+                # the plateau of the measured |torque|: the median of the samples within
+                # 4 noise deviations of the peak (the peak itself is biased up by the noise)
+                y = np.abs(prob.measured[:, prob.channels.index(c)])
+                y = y[np.isfinite(y)]
+                sd = prob.noise[c]
+                top = y[y >= float(np.max(y)) - 4.0 * sd]
+                v = float(np.median(top))
+            else:
+                v = 1e3
+        x0.append(v)
+    return np.array(x0, dtype=float)
+
+
+def _candidates(effect: str, prob: ReplayProblem, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x0: np.ndarray, extra: Optional[List[Dict[str, float]]] = None) -> List[np.ndarray]:
+    cands = est.seed_points(effect, free, x0, extra)
+    if effect == "actuator_saturation":
+        # x0 puts every limit at its joint's measured peak; a joint that never saturated is
+        # better left unlimited (its peak is only clipped by noise), so also try each joint
+        # limited alone (the objective is flat above a peak: the fit cannot find this itself)
+        for k in range(len(free)):
+            x = np.full_like(x0, 1e3)
+            x[k] = x0[k]
+            cands.append(x)
+    return cands
+
+
+def left_out(flat: np.ndarray, p: fx.EffectParam, i: int) -> bool:
+    """Whether entry ``i`` of ``p`` is one its effect's structure leaves out in ``flat``:
+    an infinite value in that entry of any of the effect's parameters of the same length
+    (torsion's ``k_t = inf``: that link rigid, its damping idle). Refitting it would move
+    a parameter the run cannot see (an interval of ±inf that spoils the others')."""
+    return any(q.length == p.length and math.isinf(flat[q.offset + i]) for q in fx.EFFECTS[p.effect].params.values())
+
+
+def _absent_entries(structure: Optional[Dict[str, Any]]) -> Set[int]:
+    """Joint/link entries a structure leaves out (an infinite stiffness: that link rigid)."""
+    out: Set[int] = set()
+    for v in (structure or {}).values():
+        if isinstance(v, (list, tuple)):
+            out.update(i for i, x in enumerate(v) if isinstance(x, float) and math.isinf(x))
+    return out
+
+
+def _step_for(prob: ReplayProblem, m: "Model", check: "Model") -> float:
+    """The step [s] candidate ``m`` runs at: its own if stable with the margin, else the
+    largest divisor of the output period within ``STABILITY_MARGIN`` of the stability
+    limit of ``check`` (the candidate at its stiffest seed)."""
+    q = check.rest_state(list(prob.q_enc[0] if not prob.closed else prob.q0))
+    # stable_dt returns the model's own dt when that is stable: ask with a huge step to get the limit
+    sdt = check.with_dt(1.0).stable_dt([float(x) for x in q], replay=not prob.closed)
+    if STABILITY_MARGIN * sdt >= m.dt * (1 - 1e-12):
+        return m.dt
+    period = 1.0 / prob.sample_rate
+    k = max(1, int(math.ceil(period / (STABILITY_MARGIN * sdt) - 1e-9)))
+    return period / k
+
+
+def unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
+    """Why effect ``name`` fitted to ``flat`` is below the encoder's resolution ("" if not)."""
+    key = PLAY_PARAMS.get(name)
+    if key is None:
+        return ""
+    w = prob.encoder_width
+    gap = np.asarray(flat[fx.EFFECTS[name].params[key].slice], dtype=float)
+    if not (np.any(w > 0) and np.all(gap < PLAY_READINGS * w)):
+        return ""
+    return (f"not significant: its {key} ({fmt_list(gap.tolist())} rad) is narrower than {PLAY_READINGS:g} encoder readings "
+            f"({fmt_list(w.tolist())} rad each): a joint moving unseen inside its reading looks the same")
+
+
+def silent_on(mask: np.ndarray, z0: np.ndarray, z1: np.ndarray) -> bool:
+    """Whether residual ``z1`` equals ``z0`` on the samples of ``mask`` (an effect that does
+    not act there, e.g. a torque limit reached only in the training blocks): the held-out
+    samples can then neither confirm nor refute it."""
+    a, b = np.asarray(z0)[mask], np.asarray(z1)[mask]
+    if a.size == 0 or not np.array_equal(np.isnan(a), np.isnan(b)):
+        return False
+    ok = ~np.isnan(a)
+    return bool(ok.any() and np.max(np.abs(a[ok] - b[ok])) <= 1e-9)
+
+
+def rank_key(s: Suspect) -> Tuple[int, int, float]:
+    return (0 if s.significant else 1, 0 if s.tested else 1, -s.score if math.isfinite(s.score) else math.inf)
+
+
+class _Fitted:
+    """A fitted candidate on its own problem (possibly another structure and step)."""
+
+    def __init__(self, name: str, variant: str, prob: ReplayProblem, z_base: np.ndarray, free: List[Tuple[fx.EffectParam, int]], out: est.FitOutcome,
+                 k: Optional[int] = None) -> None:
+        self.name, self.variant, self.prob, self.z_base, self.free, self.out = name, variant, prob, z_base, free, out
+        lr, self.neff = est.log_ratio(prob, z_base, out.z, prob.train)
+        self.k = len(free) if k is None else int(k)  # the candidate's own parameters (refitted earlier effects excluded)
+        self.score = lr - self.k * math.log(self.neff)
+        self.lr_val, _ = est.log_ratio(prob, z_base, out.z, prob.validation)
+        self.e0, _ = prob.error(z_base)
+        self.e1, self.per1 = prob.error(out.z)
+        self.v0, _ = prob.error(z_base, prob.validation)
+        self.v1, _ = prob.error(out.z, prob.validation)
+        self.explained = 1.0 - (self.e1 / self.e0) ** 2 if self.e0 > 0 and math.isfinite(self.e1) else 0.0
+        self.unresolved = unresolved_play(prob, name, out.flat)
+        self.silent = silent_on(prob.validation & prob.used, z_base, out.z)
+        self.significant = bool(
+            self.score > SCORE_THRESHOLD and self.explained >= MIN_EXPLAINED
+            and ((self.lr_val > 0 and self.v1 < self.v0) or self.silent) and not self.unresolved
+        )
+
+    def suspect(self, ev: Dict[str, Any], nfev: int, message: str = "") -> Suspect:
+        names = [f"{p.name}[{i}]" if p.effect == self.name else f"{p.effect}.{p.name}[{i}]" for p, i in self.free]
+        half, ident = est.uncertainty(self.out, self.free, names, self.neff)
+        ci: Dict[str, List[float]] = {}
+        for (p, i), h in zip(self.free, half):
+            if p.effect == self.name:
+                ci.setdefault(p.name, [math.nan] * p.length)[i] = float(h)
+        return Suspect(
+            self.name, self.significant, float(self.score), est.params_dict(self.name, self.out.flat), ci, self.e0, self.e1, self.per1, ev,
+            n_eff=self.neff, n_rollouts=nfev, tested=True, explained=self.explained,
+            message="; ".join(m for m in (self.unresolved, "not checked on the held-out samples: it does not act there" if self.silent else "", message) if m),
+            validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant,
+            identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free if p.effect == self.name}),
+            refitted={e: est.params_dict(e, self.out.flat) for e in sorted({p.effect for p, _ in self.free if p.effect != self.name})},
+        )
+
+
+def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str, Any]], only: Optional[Sequence[str]], start: Optional[Dict[str, List[float]]],
+                   extra_seeds: Optional[List[Dict[str, Any]]], max_iter: int, variant: str = "",
+                   also: Optional[List[Tuple[fx.EffectParam, int]]] = None, stiffest: Optional[Dict[str, Any]] = None,
+                   dt: Optional[float] = None, seeds: bool = True) -> Tuple[_Fitted, str]:
+    """Fit one candidate (``structure``, the names ``only`` or every fitted one) from
+    ``start`` and the effect's seeds (``seeds=False``: from ``start`` alone), with the
+    entries of ``also`` refitted jointly; ``dt``: the step to use (default: from the
+    structure's stability limit at ``stiffest``)."""
+    model = prob.model
+    m = model
+    note = ""
+    pb, z_base = prob, prob.residuals(prob.nominal_simulation())
+    if structure is not None:
+        m = model.with_effect(name, **structure)
+        if dt is None:
+            check = m.with_effect(name, **(stiffest if stiffest is not None else STIFFEST.get(name, {})))
+            dt = _step_for(prob, m, check)
+        if dt < model.dt * (1 - 1e-12):
+            m = m.with_dt(dt)
+            pb = prob.with_model(model.with_dt(dt))
+            z_base = pb.residuals(pb.nominal_simulation())
+            note = f"run at dt = {dt:.3g} s (its structure's stability limit; the nominal model re-run at the same step)"
+    p = pb.with_model(m) if m is not pb.model else pb
+    free = est.free_params(name, only)
+    absent = _absent_entries(structure)
+    free = [(q, i) for q, i in free if i not in absent]
+    flat = m.effects_flat.copy()
+    if start:
+        for k, v in start.items():
+            sl = fx.EFFECTS[name].params[k].slice
+            keep = flat[sl].copy()
+            flat[sl] = v
+            for i in absent:  # an entry the structure leaves out keeps the structure's value
+                if i < len(keep):
+                    flat[sl.start + i] = keep[i]
+    x0 = np.array([flat[q.offset + i] for q, i in free]) if start else _x0(p, free, flat)
+    cands = _candidates(name, p, free, flat, x0, extra_seeds) if seeds else [x0]
+    # the effects added in earlier rounds are refitted with the candidate (forward
+    # selection with refit: an earlier fit biased by this effect's absence is corrected)
+    others = [pi for pi in (also or []) if pi[0].effect != name]
+    cur = np.array([flat[q.offset + i] for q, i in others])
+    cands = [np.concatenate([c, cur]) for c in cands]
+    free_all = free + others
+    iters = max(max_iter, MIN_ITER.get(name, 0))
+    if name in SHORT_FIRST and seeds:
+        # a lightly damped response (or a link side crossing its gap) drifts out of phase
+        # over a long run, which makes the full-run objective a needle around the truth:
+        # fit on a short horizon first (a wide basin), then on horizons doubled in turn,
+        # each from the last optimum (continuation), and offer the result as one more start
+        t0, t1 = float(p.time[0]), float(p.time[-1])
+        h = max(SHORT_HORIZON_S, 0.2 * (t1 - t0))
+        ph = p.with_horizon(t0 + h)
+        if ph is not p:
+            xh, _ = est.best_start(ph, free_all, flat, cands)
+            if name in COORDINATE_SEEDS:
+                xh = _coordinate_seeds(ph, name, free_all, flat, xh)
+            xh = est.fit(ph, flat, free_all, xh, iters).x
+            while 2.0 * h < t1 - t0:
+                h *= 2.0
+                ph = p.with_horizon(t0 + h)
+                xh = est.fit(ph, flat, free_all, xh, iters, mask=p.train[p.time <= t0 + h]).x
+            cands.append(xh)
+    xs, _ = est.best_start(p, free_all, flat, cands)
+    out = est.fit(p, flat, free_all, xs, iters)
+    return _Fitted(name, variant, p, z_base, free_all, out, k=len(free)), note
+
+
+def _coordinate_seeds(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """One sweep over the entries of ``name``'s seeded parameters: each entry in turn set to
+    every value of a fine log grid over its seeds' range (the others at the best so far), the
+    best kept (one batched rollout per entry). Seeds that move every joint together miss
+    unequal gaps."""
+    seen: Dict[str, List[float]] = {}
+    for seed in est.SEEDS.get(name, []):
+        for k, v in seed.items():
+            seen.setdefault(k, []).extend(np.atleast_1d(np.asarray(v, dtype=float)).tolist())
+    # a log grid COORDINATE_STEP apart over the seeds' range: a link side floating in its
+    # gap makes the objective a needle a few % wide in that gap, even on the short horizon
+    grid = {k: np.exp(np.arange(math.log(min(v)), math.log(max(v)) + 1e-9, math.log(COORDINATE_STEP))).tolist() for k, v in seen.items() if min(v) > 0}
+    x = np.asarray(x, dtype=float).copy()
+    for j, (q, _) in enumerate(free):
+        if q.effect != name or q.name not in grid:
+            continue
+        cands = [x]
+        for v in grid[q.name]:
+            c = x.copy()
+            c[j] = min(max(v, q.lower), q.upper)
+            cands.append(c)
+        x, _ = est.best_start(prob, free, flat, cands)
+    return x
+
+
+def try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int, also: Optional[List[Tuple[fx.EffectParam, int]]] = None,
+                prior: Optional[Mapping[str, Sequence[float]]] = None) -> Suspect:
+    """Fit ``name`` from its seeds (and ``prior``, its fit of an earlier round, as one more
+    start), then its variants; the best as a :class:`Suspect`."""
+    n0 = prob.nfev
+    try:
+        fitted, note = _fit_candidate(prob, name, STRUCTURE.get(name), None, None, [dict(prior)] if prior else None, max_iter, also=also)
+    except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
+        return Suspect(name, False, -math.inf, {}, {}, math.nan, math.nan, {}, ev, tested=False,
+                       message=f"not tested: {type(e).__name__}: {e}")
+    best = fitted
+    best_var: Optional[Dict[str, Any]] = None
+    tried: List[Tuple[Dict[str, Any], _Fitted]] = []
+    notes = [note] if note else []
+    base_params = est.params_dict(name, fitted.out.flat)
+    for var in VARIANTS.get(name, []):
+        if not (fitted.significant or var.get("alternative")):
+            continue
+        try:
+            struct = dict(STRUCTURE.get(name) or {})
+            struct.update(var.get("structure") or {})
+            only = None
+            start = None
+            if var.get("extra"):
+                only = sorted({p.name for p, _ in fitted.free} | set(var["extra"]))
+                start = {k: v for k, v in base_params.items() if k in only and k not in var["extra"]}
+            # a structural variant starts from the base fit: its step is set for 1.5 × the
+            # base's stiffness, not the whole plausible range (3 segments at k_scale 5 would
+            # need a 14 × smaller step)
+            stiff = {k: [min(1.5 * x, est.BOUNDS.get((name, k), (0.0, math.inf))[1]) for x in base_params[k]]
+                     for k in STIFFEST.get(name, {}) if k in base_params} if var.get("structure") else None
+            if var.get("structure") and stiff:
+                start = {k: base_params[k] for k in stiff}
+            if var.get("stiffest"):
+                stiff = dict(var["stiffest"])
+            vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also, stiffest=stiff)
+        except Exception as e:  # noqa: BLE001
+            notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
+            continue
+        tried.append((var, vf))
+        gain = _gain(vf, best)
+        if vf.significant and gain > (SCORE_THRESHOLD if best.significant else 0.0):
+            notes.append(f"variant {var['name']} preferred (score {vf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f})")
+            best, best_var = vf, var
+        else:
+            notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f}"
+                         + (f"; {vf.unresolved}" if vf.unresolved else "") + ")")
+    if best_var is not None:
+        best = _try_combined(prob, name, best, best_var, tried, max_iter, also, notes)
+    return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
+
+
+def _combined(a: Mapping[str, Any], b: Mapping[str, Any]) -> Optional[Dict[str, Any]]:
+    """Variants ``a`` and ``b`` of one effect together (structures merged, extras joined;
+    named "a + b"), or ``None`` where they cannot be (another law; structures on the same
+    parameter)."""
+    if a.get("alternative") or b.get("alternative"):
+        return None
+    sa, sb = dict(a.get("structure") or {}), dict(b.get("structure") or {})
+    if set(sa) & set(sb):
+        return None
+    extra = sorted(set(a.get("extra") or []) | set(b.get("extra") or []))
+    out: Dict[str, Any] = {"name": f"{a['name']} + {b['name']}", "structure": {**sa, **sb}, "extra": extra}
+    if a.get("stiffest") or b.get("stiffest"):
+        out["stiffest"] = {**dict(a.get("stiffest") or {}), **dict(b.get("stiffest") or {})}
+    return out
+
+
+def _variant_named(effect: str, name: str) -> Optional[Dict[str, Any]]:
+    """The variant of ``effect`` called ``name`` (:data:`VARIANTS`, or a combination of
+    them "a + b" as :func:`_try_combined` names it); ``None`` for the base law."""
+    if not name:
+        return None
+    out: Optional[Dict[str, Any]] = None
+    for part in name.split(" + "):
+        v = next((x for x in VARIANTS.get(effect, []) if x["name"] == part), None)
+        if v is None:
+            return None
+        out = dict(v) if out is None else _combined(out, v)
+        if out is None:
+            return None
+    return out
+
+
+def _variant_key(v: Mapping[str, Any]) -> Tuple[Tuple[str, ...], str]:
+    return tuple(sorted(v.get("extra") or [])), repr(sorted((v.get("structure") or {}).items()))
+
+
+def _try_combined(prob: ReplayProblem, name: str, best: _Fitted, best_var: Mapping[str, Any], tried: Sequence[Tuple[Mapping[str, Any], _Fitted]],
+                  max_iter: int, also: Optional[List[Tuple[fx.EffectParam, int]]], notes: List[str]) -> _Fitted:
+    """The preferred variant ``best_var`` (fit ``best``) with each other variant of ``tried``
+    that beats the nominal model by the threshold added to it, fitted from ``best``'s values
+    (and from that variant's own fit): kept where the likelihood
+    prefers it by the significance threshold in BIC. A 3-segment link whose root is stiffer
+    is neither "3 segments" nor "stiffer root" (a popup-engine run left 0.83 noise units
+    with the second alone, 0.37 with both, on the truth's values)."""
+    own = {_variant_key(v) for v in VARIANTS.get(name, [])}
+    params = est.params_dict(name, best.out.flat)
+    for var, vf in tried:
+        # a variant that beats the nominal model by the threshold on its own but not on the
+        # held-out part may miss only what ``best`` adds (compliant flanks at the default
+        # link-side inertia: score 280 where the fitted inertia had 3990), so it is tried
+        # with it; the combination must pass the whole test itself
+        if var is best_var or not (vf.significant or (vf.score > SCORE_THRESHOLD and not vf.unresolved)):
+            continue
+        cv = _combined(best_var, var)
+        if cv is None:
+            continue
+        if _variant_key(cv) in own or _variant_key(cv) == _variant_key(best_var):  # nothing new
+            continue
+        try:
+            struct = {**dict(STRUCTURE.get(name) or {}), **cv["structure"]}
+            fitted_names = {p.name for p, _ in best.free if p.effect == name}
+            only = sorted(fitted_names | set(cv["extra"]))
+            # ``best``'s values of what it fitted; what the other variant adds starts from the
+            # structure's value (``best``'s own is its law's neutral one: contact_k = 0, the
+            # rigid flanks, is no start for a stiffness fitted as its logarithm)
+            start = {k: v for k, v in params.items() if k in fitted_names}
+            stiff = ({k: [min(1.5 * x, est.BOUNDS.get((name, k), (0.0, math.inf))[1]) for x in params[k]]
+                      for k in STIFFEST.get(name, {}) if k in params} if cv["structure"] else None) or None
+            if cv.get("stiffest"):
+                stiff = dict(cv["stiffest"])
+            # two more starts: the other variant's own fit, with ``best``'s extras and as it
+            # is (on MuJoCo's soft gear, from the flanks' seeds alone the combination ended 640
+            # BIC below the fitted inertia alone; from the flanks' own fit, 615 above it)
+            own_extra = set(best_var.get("extra") or [])
+            vp = {k: v for k, v in est.params_dict(name, vf.out.flat).items() if k in only}
+            from_var = [{k: v for k, v in vp.items() if k not in own_extra}, vp]  # with best's extras, and as fitted
+            cf, _ = _fit_candidate(prob, name, struct, only, start, from_var + list(var.get("seeds") or []), max_iter,
+                                   variant=cv["name"], also=also, stiffest=stiff,
+                                   seeds=bool(set(var.get("extra") or []) - own_extra))
+        except Exception as e:  # noqa: BLE001
+            notes.append(f"variant {cv['name']} not tested: {type(e).__name__}: {e}")
+            continue
+        gain = _gain(cf, best)
+        if cf.significant and gain > SCORE_THRESHOLD:
+            notes.append(f"variant {cv['name']} preferred (score {cf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f})")
+            best, best_var = cf, cv
+        else:
+            notes.append(f"variant {cv['name']} not preferred (score {cf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f})")
+    return best
+
+
+def screen_fit(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int, start: Mapping[str, Sequence[float]]) -> Suspect:
+    """``name`` at its base law fitted from ``start`` alone (its fit of an earlier round): the
+    cheap screen of :func:`diagnose`'s ``screen``."""
+    n0 = prob.nfev
+    base = {p.name for p in fx.EFFECTS[name].fit_params}
+    st = {k: list(v) for k, v in start.items() if k in base}
+    try:
+        fitted, note = _fit_candidate(prob, name, STRUCTURE.get(name), None, st or None, None, max_iter, seeds=False)
+    except Exception as e:  # noqa: BLE001 - one effect failing must not stop the ranking
+        return Suspect(name, False, -math.inf, {}, {}, math.nan, math.nan, {}, ev, tested=False,
+                       message=f"not tested: {type(e).__name__}: {e}")
+    return fitted.suspect(ev, prob.nfev - n0, note)
+
+
+def _gain(a: _Fitted, b: _Fitted) -> float:
+    """BIC gain of fit ``a`` over fit ``b`` of the same run: their likelihood ratio taken
+    directly, with one effective sample count (``a``'s residual), less ln n_eff per extra
+    parameter. Each fit's score against the nominal weighs its log-ratio by the n_eff of
+    its own residual, so two good fits of the same law differ there by a percent of a large
+    score (a friction fit whose residual was a little whiter scored 95 more with three parameters
+    that landed on the default); a direct ratio does not. Fits on different output grids
+    fall back to the difference of their scores."""
+    if a.out.z.shape == b.out.z.shape and np.array_equal(np.asarray(a.prob.time), np.asarray(b.prob.time)):
+        lr, ne = est.log_ratio(a.prob, b.out.z, a.out.z, a.prob.train)
+        return lr - (a.k - b.k) * math.log(ne)
+    return a.score - b.score
+
+
+def refit_jointly(prob: ReplayProblem, s: Suspect, ev: Dict[str, Any], max_iter: int, also: List[Tuple[fx.EffectParam, int]],
+                   prior: Optional[Mapping[str, Sequence[float]]] = None) -> Suspect:
+    """The screened candidate ``s`` (fitted with the earlier effects held) refitted with
+    them (``also``): its law (variant), step and fitted names, from its screened optimum,
+    and also from ``prior`` (its fit of an earlier round; the better of the two is kept).
+    With the earlier effects held, a candidate they absorbed screens at its neutral value
+    (a payload at +0.0002 kg beside a torsion fitted without it), a point the joint fit
+    does not leave; its fit from the round before is in the joint basin."""
+    n0 = prob.nfev
+    var = _variant_named(s.effect, s.variant)
+    struct = dict(STRUCTURE.get(s.effect) or {})
+    struct.update((var or {}).get("structure") or {})
+    start = {k: list(s.params[k]) for k in s.fitted if k in s.params}
+    starts = [start]
+    if prior:
+        alt = dict(start)
+        alt.update({k: list(v) for k, v in prior.items() if k in start and np.shape(v) == np.shape(start[k])})
+        if alt != start:
+            starts.append(alt)
+    try:
+        fits = [_fit_candidate(prob, s.effect, struct or None, list(s.fitted) or None, st, None, max_iter, variant=s.variant,
+                               also=also, dt=s.dt, seeds=False)[0] for st in starts]
+        fitted = max(fits, key=lambda f: f.score if math.isfinite(f.score) else -math.inf)
+    except Exception as e:  # noqa: BLE001 - the screened fit stands
+        s.message = "; ".join(x for x in (s.message, f"joint refit failed: {type(e).__name__}: {e}") if x)
+        return s
+    j = fitted.suspect(ev, s.n_rollouts + prob.nfev - n0, s.message)
+    if j.score >= s.score:
+        j.message = "; ".join(x for x in (s.message, f"refitted with {', '.join(sorted({p.effect for p, _ in also}))} (score {s.score:.1f} → {j.score:.1f})") if x)
+        return j
+    s.n_rollouts = j.n_rollouts
+    s.message = "; ".join(x for x in (s.message, f"joint refit scored lower ({j.score:.1f}): the screened fit is kept") if x)
+    return s

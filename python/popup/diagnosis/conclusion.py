@@ -1,0 +1,140 @@
+"""The sentences of a diagnosis: one round's conclusion and the whole history's (what was
+added, how far the error fell, what is left and where)."""
+
+from __future__ import annotations
+
+import math
+from typing import Dict, List, Mapping, Optional
+
+from ..problem import SPIKE_SIGMA, ReplayProblem
+from .rules import AT_FLOOR, FLOOR_MULTIPLE, SPIKE_SHARE
+from .results import Diagnosis, History, fmt_params, step_at_floor
+
+
+def round_conclusion(d: Diagnosis) -> str:
+    b = d.best
+    parts = []
+    if b is not None:
+        parts.append(
+            f"{b.effect}{f' ({b.variant})' if b.variant else ''} explains the most: adding it is predicted to take the systematic error from "
+            f"{b.error_before:.3g} to {b.error_after:.3g} noise units ({100 * b.explained:.0f} % of it; held out {b.validation_before:.3g} → {b.validation_after:.3g})"
+        )
+    elif d.nominal_error <= AT_FLOOR:
+        parts.append(f"at the noise floor (systematic error {d.nominal_error:.3g} noise units): no library effect is significant")
+    elif d.model_at_floor:
+        parts.append(f"at its floor, the noise and the encoder's resolution (systematic error {d.nominal_error:.3g} noise units, "
+                     f"{d.floor_error:.3g} above the floor; {_encoder_text(d.encoder_floor)}): no library effect is significant")
+    else:
+        parts.append(f"no library effect explains the systematic error of {d.nominal_error:.3g} noise units: it is not explained by the library ({_where(d)})")
+    if d.untested and not d.model_at_floor:
+        parts.append("the ranking is incomplete: " + "; ".join(f"{s.effect} {s.message}" for s in d.untested))
+    return "; ".join(parts)
+
+
+def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
+    """Where the unexplained error sits: channels, time window, frequency band."""
+    per = d.channel_error if per is None else per
+    worst = sorted(per.items(), key=lambda kv: -kv[1])[:3]
+    txt = "worst channels " + ", ".join(f"{c} {v:.2g}× noise" for c, v in worst)
+    cmp = d.comparison
+    try:
+        w = cmp.windows.sort_values("rank").iloc[0]
+        txt += f"; worst window t = {float(w['t_start']):.3g}–{float(w['t_end']):.3g} s ({100 * float(w['error_share']):.0f} % of the error)"
+        c0 = worst[0][0]
+        sp = cmp.spectrum.loc[c0]
+        if str(sp["dominant_band"]):
+            txt += f"; {c0}'s residual mostly in {sp['dominant_band']} (peak {float(sp['peak_hz']):.3g} Hz)"
+    except Exception:  # noqa: BLE001 - a missing view must not hide the finding
+        pass
+    prob = d.problem
+    if prob is not None:
+        try:
+            sp = prob.spikes(prob.residuals(prob.nominal_simulation()))
+        except Exception:  # noqa: BLE001
+            sp = {}
+        big = sorted(((c, v) for c, v in sp.items() if v["share"] >= SPIKE_SHARE and per.get(c, 0.0) > FLOOR_MULTIPLE), key=lambda kv: -kv[1]["share"])
+        if big:
+            txt += "; isolated spikes (sensor glitches, or an effect sharper than a sample): " + ", ".join(
+                f"{c} {v['count']} sample(s) > {SPIKE_SIGMA:g}σ from their neighbours (first at t = {v['times'][0]:.4g} s), "
+                f"{100 * v['share']:.0f} % of its excess" for c, v in big[:3])
+    return txt
+
+
+def _encoder_text(ef: Mapping[str, float]) -> str:
+    big = sorted(((c, v) for c, v in ef.items() if v > 1.05), key=lambda kv: -kv[1])[:3]
+    if not big:
+        return "the encoder adds nothing above the noise"
+    return "the encoder's error alone replays at " + ", ".join(f"{v:.2g}× noise on {c}" for c, v in big)
+
+
+def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) -> str:
+    """The whole history in words: what was added (value, interval, the fall of the error
+    overall and on the channels it acts on), then what is left; ``prob``: the run's problem
+    in the floors the steps are in (default: the first diagnosis's), and where the loop
+    re-estimated them (:func:`_floors_update`) the conclusion says so."""
+    parts: List[str] = []
+    for i in range(1, len(h.steps)):
+        prev, st = h.steps[i - 1], h.steps[i]
+        if st.removed and st.swapped_in:
+            e = st.swapped_in
+            ptxt = fmt_params({k: v for k, v in st.params.get(e, {}).items() if k in st.ci95.get(e, {})}, st.ci95.get(e, {})) or fmt_params(st.params.get(e, {}), {})
+            parts.append(f"replaced {st.removed} by {e} ({ptxt}): {st.removed} stood in for it; the error "
+                         f"{'fell' if st.error < prev.error else 'went'} from {prev.error:.3g} to {st.error:.3g} noise units")
+            continue
+        if st.removed:
+            parts.append(f"removed {st.removed} again (with {', '.join(st.effects)} refitted it explains nothing more; error {prev.error:.3g} → {st.error:.3g})")
+            continue
+        e = st.effects[-1]
+        vals = st.params.get(e, {})
+        ci = st.ci95.get(e, {})
+        ptxt = fmt_params({k: v for k, v in vals.items() if k in ci}, ci) or fmt_params(vals, {})
+        drop = 1.0 - st.error / prev.error if prev.error > 0 else 0.0
+        moved = sorted(((c, prev.channel_error.get(c, math.nan), st.channel_error.get(c, math.nan)) for c in st.channel_error),
+                       key=lambda x: -(x[1] - x[2]) if math.isfinite(x[1] - x[2]) else 0.0)[:3]
+        ch = ", ".join(f"{c} {a:.2g}× → {b:.2g}× noise" for c, a, b in moved if a - b > 0.05 * a)
+        reset = f", with {st.law_reset} back at its base law (its richer variant had stood in for {e})" if st.law_reset else ""
+        fall = (f"the systematic error fell from {prev.error:.3g} to {st.error:.3g} noise units ({100 * drop:.0f} % less)" if st.error < prev.error
+                else f"the systematic error went from {prev.error:.3g} to {st.error:.3g} noise units")
+        parts.append(f"added {e} ({ptxt}){reset}: {fall}" + (f"; on {ch}" if ch else ""))
+    last = h.steps[-1]
+    d_last = h.diagnoses[-1] if h.diagnoses and h.diagnoses[-1].problem is not None and h.diagnoses[-1].problem.model is last.model else None
+    n_added = sum(1 for st in h.steps[1:] if not st.removed)
+    prob0 = prob if prob is not None else h.diagnoses[0].problem if h.diagnoses and h.diagnoses[0].problem is not None else None
+    try:
+        floor = prob0 is not None and step_at_floor(last, prob0)
+    except Exception:  # noqa: BLE001 - the words still go out: not shown to be at the floor
+        floor = False
+    if last.error <= AT_FLOOR or floor:
+        if last.error <= AT_FLOOR:
+            what = f"the noise floor (systematic error {last.error:.3g} noise units)"
+        else:
+            assert prob0 is not None
+            what = (f"its floor, the noise and the encoder's resolution (systematic error {last.error:.3g} noise units, "
+                    f"{prob0.floor_error(last.channel_error):.3g} above that floor; {_encoder_text(prob0.encoder_floor)})")
+        left = f"what is left is at {what}"
+        if parts and floor:
+            left += f", every channel within {FLOOR_MULTIPLE:g}× its floor: nothing more was tried"
+        if not parts:
+            left = f"the model is at {what}: nothing significant is missing"
+    else:
+        where = _where(d_last, last.channel_error) if d_last is not None else ", ".join(f"{c} {v:.2g}× noise" for c, v in sorted(last.channel_error.items(), key=lambda kv: -kv[1])[:3])
+        if d_last is not None and d_last.best is not None and n_added >= max_rounds:
+            left = f"stopped after max_rounds = {max_rounds}; {d_last.best.effect} is still significant ({where})"
+        else:
+            left = f"a systematic error of {last.error:.3g} noise units is left that is not explained by the library ({where})"
+    if any(c > 0 for c in last.unseen_compliance):
+        left += (" (the replay includes the motor joints' motion inside one encoder reading, a servo compliance of "
+                 + "/".join(f"{c:.2g}" for c in last.unseen_compliance) + " rad/(N·m) per joint: popup.unseen)")
+    parts.append(left)
+    untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses if not d.model_at_floor for s in d.untested})
+    if untested:
+        parts.append("the ranking is incomplete: " + "; ".join(untested))
+    floors_moved = {c: h.noise[c] / v for c, v in h.noise_initial.items() if v > 0 and c in h.noise and h.noise[c] != v}
+    if floors_moved:
+        txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(floors_moved.items(), key=lambda kv: -abs(math.log(kv[1]))))
+        parts.append(f"the history's errors are in noise floors re-estimated on a refitted model, the nominal residual's misfit having "
+                     f"biased them ({txt} the first estimate)")
+    if h.error:
+        parts.append(f"incomplete: {h.error}; the rounds before it are kept")
+    text = "; ".join(parts)
+    return text[0].upper() + text[1:] + "."

@@ -1,0 +1,488 @@
+"""The loop (:func:`improve`): add the best significant effect, refit, diagnose again; the
+backward, swap and base-law steps; the floors re-estimated after each step."""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
+
+import numpy as np
+
+from .. import effects as fx
+from .. import estimate as est
+from ..exceptions import InputError, StepTooLargeError
+from ..io import MeasuredRun
+from ..problem import ReplayProblem
+from ..unseen import fit_unseen_motion
+from .rules import ENCODER_NOTE, JOINT_TOP, MIN_ITER, NOISE_RECHECK, Progress, SCORE_THRESHOLD, STEP_HALVINGS, model_at_floor
+from .results import Diagnosis, History, HistoryStep, step_at_floor
+from .candidate import left_out, unresolved_play
+from .conclusion import conclude
+from .rank import diagnose
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..model import Model
+
+
+def improve(
+    model: "Model",
+    run: MeasuredRun,
+    *,
+    max_rounds: int = 4,
+    effects: Optional[Sequence[str]] = None,
+    channels: Optional[Sequence[str]] = None,
+    sample_rate: Optional[float] = None,
+    threads: int = 0,
+    max_iter: int = 15,
+    progress: Optional[Progress] = None,
+    rank_at_floor: bool = False,
+) -> History:
+    """The loop: diagnose, add the top significant effect, refit every added effect
+    jointly, diagnose again; until no effect is significant or ``max_rounds``.
+
+    Nothing is lost: a failure in round k returns rounds 1..k−1 with ``History.error``
+    set. Errors in the set-up (a run the model cannot replay at all) are raised.
+    ``rank_at_floor``: as :func:`diagnose`, for a model at its floor from the start."""
+    t_start = time.perf_counter()
+    for n in effects or []:
+        fx.normalize(n, {})  # bad input is refused before any work
+    if int(max_rounds) < 0:
+        raise InputError(f"input max_rounds: {max_rounds} must be ≥ 0")
+    est.check_max_iter(max_iter)
+    prob = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads))
+    steps = [_step(prob, [], {}, 0)]
+    noise0 = prob.noise
+    diags: List[Diagnosis] = []
+    added: List[str] = []
+    fitted_params: Dict[str, List[str]] = {}
+    swap_tried: Dict[str, Set[str]] = {}
+    notes: List[str] = []  # what the swap and base-law steps tried and why, the floors re-estimated
+    current, cprob = model, prob
+    error = ""
+    rnd = 0
+
+    stage, stage_round = "", 0  # what a fit of a swap or base-law step is for, and its round
+
+    def prog(info: Dict[str, Any]) -> None:
+        if progress is not None:
+            progress(dict(info, round=stage_round if stage else rnd + 1, effect=f"{stage}{info.get('effect', '')}"))
+
+    try:
+        d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, rank_at_floor=rank_at_floor)
+        diags.append(d)
+        while rnd < max_rounds:
+            reset = ""
+            if d.best is not None:
+                rnd += 1
+                s = d.best
+                added.append(s.effect)
+                fitted_params[s.effect] = list(s.fitted)
+                cand = s.apply(current)
+                cprob = prob.with_model(cand)
+                if progress is not None:
+                    progress({"round": rnd, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
+                current, cprob, ci = _refit_stable(cprob, added, fitted_params, max_iter)
+                cprob = fit_unseen_motion(cprob)  # the torques changed with the model
+            else:
+                # nothing significant is left, but the model is not at its floor: a richer
+                # law chosen for an earlier effect may be standing in for a missing effect
+                # (a payload's centre-of-mass offset for a torsion); each is tried back at
+                # its base law with the best candidate added
+                lw = None
+                if added and not step_at_floor(steps[-1], prob):
+                    for e in list(added):
+                        # first the candidates significant in some round (screened from their
+                        # fits); then the rest of the library, each fitted from its seeds: an
+                        # effect whose error the extras took may show only beside the base law
+                        # (a soft torsion with a payload: each alone replays worse than neither,
+                        # MuJoCo pair, benchmarks/README.md session 23)
+                        sig = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects)]
+                        rest = [c for c in (fx.EFFECT_NAMES if effects is None else effects) if c not in added and c not in sig]
+                        stage, stage_round = f"{e} at its base law: ", rnd + 1
+                        lw = _try_base_law(prob, run, cprob, e, added, fitted_params, sig, diags, threads, max_iter, prog, notes, more=rest)
+                        stage = ""
+                        if lw is not None:
+                            reset = e
+                            break
+                if lw is None:
+                    break
+                rnd += 1
+                c, current, cprob, ci, fitted_params, d_law = lw
+                added.append(c)
+                diags.append(d_law)
+            steps.append(_step(cprob, added, ci, rnd, law_reset=reset))
+            prob, cprob, steps = _floors_update(prob, cprob, steps, notes, rnd)
+            # backward and swap steps, around the newest effect (the one just added, or
+            # just swapped in: the others are then all "earlier" than it), until no swap
+            # is kept
+            newest = added[-1]
+            while True:
+                # backward step: an effect added earlier that the refitted model no longer
+                # needs (it stood in for the newest) is removed
+                for e in [x for x in added if x != newest]:
+                    if not _still_needed(cprob, e, fitted_params[e]):
+                        added.remove(e)
+                        fitted_params.pop(e)
+                        current, cprob, ci = _refit_stable(cprob.with_model(current.without_effect(e)), added, fitted_params, max_iter)
+                        cprob = fit_unseen_motion(cprob)
+                        steps.append(_step(cprob, added, ci, rnd, removed=e))
+                        prob, cprob, steps = _floors_update(prob, cprob, steps, notes, rnd)
+                # swap step: an effect added earlier may have stood in for two (the greedy
+                # first round picks one effect for the error of both); it is tried replaced
+                # by the best candidate for the model without it, kept when the likelihood
+                # prefers it. After a swap the effect added this round is "earlier" too (a
+                # stand-in picked beside the old stand-in: wrinkling beside a backlash that
+                # stood in for drag, a payload missing)
+                swapped = False
+                for e in [x for x in added if x != newest]:
+                    if step_at_floor(steps[-1], prob):
+                        break
+                    # only candidates some round found significant: one that e stood in for
+                    # explained much of the same error when e was chosen; each pair once
+                    pool = [c for c in _significant_in(diags) if c not in added and (effects is None or c in effects) and c not in swap_tried.get(e, set())]
+                    if not pool:
+                        continue
+                    swap_tried.setdefault(e, set()).update(pool)
+                    stage, stage_round = f"swap out {e}: ", rnd  # part of the round just done
+                    sw = _try_swap(prob, run, cprob, e, added, fitted_params, pool, diags, threads, max_iter, prog, notes)
+                    stage = ""
+                    if sw is None:
+                        continue
+                    c, current, cprob, ci, fitted_params = sw
+                    added[added.index(e)] = c
+                    steps.append(_step(cprob, added, ci, rnd, removed=e, swapped_in=c))
+                    prob, cprob, steps = _floors_update(prob, cprob, steps, notes, rnd)
+                    newest, swapped = c, True
+                    break
+                if not swapped:
+                    break
+            remaining = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
+            if not remaining or step_at_floor(steps[-1], prob):
+                break
+            # from the third round on, a cheap screen from each candidate's last fit picks
+            # the few that get the full multi-start fit (pairs are found by round 2)
+            d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, refit=fitted_params,
+                         starts=_prior_fits(diags), screen=JOINT_TOP if len(added) >= 2 else 0)
+            diags.append(d)
+    except KeyboardInterrupt:
+        raise
+    except Exception as e:  # noqa: BLE001 - nothing lost: the rounds before are returned
+        error = f"round {rnd + 1} failed: {type(e).__name__}: {e}"
+    h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise, notes=notes, noise_initial=noise0,
+                problem=prob)
+    h.conclusion = conclude(h, max_rounds, prob)
+    h.seconds = time.perf_counter() - t_start
+    return h
+
+
+def _noise_recheck(cprob: ReplayProblem) -> Dict[str, float]:
+    """The channels whose noise floor re-estimated from the residual of the model of
+    ``cprob`` (:meth:`ReplayProblem.noise_from`) differs from the one used by more than
+    :data:`NOISE_RECHECK` either way: channel → new/old. A large misfit biases the
+    estimator (up by the residual's own rough part, or down where it hides a coloured
+    noise: neighbouring samples alike under a sensor's low-pass; on MuJoCo-like runs by
+    0.77-4×), so a better model's residual gives the floor back."""
+    try:
+        new = cprob.noise_from()
+    except Exception:  # noqa: BLE001 - a check, not a result
+        return {}
+    old = cprob.noise
+    ratio = {c: new[c] / old[c] for c in old if old[c] > 0 and math.isfinite(new.get(c, math.nan)) and new[c] > 0}
+    return {c: r for c, r in ratio.items() if r > NOISE_RECHECK or r < 1.0 / NOISE_RECHECK}
+
+
+def _floors_update(prob: ReplayProblem, cprob: ReplayProblem, steps: List[HistoryStep], notes: List[str],
+                   rnd: int) -> Tuple[ReplayProblem, ReplayProblem, List[HistoryStep]]:
+    """The loop's floors estimated again on the model of ``cprob`` (the last step's: an
+    effect added, removed or swapped in): the noise floors (:func:`_noise_update`), then
+    the encoder floor in them (:func:`_encoder_update`). Later rounds, the floor stop and
+    the conclusion then use them."""
+    prob, cprob, steps = _noise_update(prob, cprob, steps, notes, rnd)
+    prob, cprob = _encoder_update(prob, cprob, steps[-1].effects, notes, rnd)
+    return prob, cprob, steps
+
+
+def _noise_update(prob: ReplayProblem, cprob: ReplayProblem, steps: List[HistoryStep], notes: List[str],
+                  rnd: int) -> Tuple[ReplayProblem, ReplayProblem, List[HistoryStep]]:
+    """The loop's noise floors re-estimated on the model of ``cprob``: where a channel's
+    differs by more than :data:`NOISE_RECHECK` (:func:`_noise_recheck`), the base problem
+    ``prob`` and ``cprob`` take the new floors, every step so far is put in them (one
+    scale, so the fall of the error stays comparable) and a line goes to ``notes``."""
+    off = _noise_recheck(cprob)
+    if not off:
+        return prob, cprob, steps
+    last = steps[-1]
+    try:
+        new = {c: cprob.noise[c] * r for c, r in off.items()}
+        out = prob.with_noise(new), cprob.with_noise(new), [st.in_floors(off) for st in steps]
+    except Exception as ex:  # noqa: BLE001 - a check: the loop goes on in the floors it had
+        notes.append(f"round {rnd}: re-estimating the noise floors failed ({type(ex).__name__}: {ex}); the floors used stand")
+        return prob, cprob, steps
+    txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(off.items(), key=lambda kv: -abs(math.log(kv[1]))))
+    notes.append(f"round {rnd}: the noise floors re-estimated from the residual of the model with {' + '.join(last.effects) or 'nothing'} "
+                 f"differ from those used (a larger misfit biases the estimator: up, or down where it hides a coloured noise): {txt}; "
+                 f"every step is now in the new floors (that model's systematic error {last.error:.3g} → {out[2][-1].error:.3g} noise units)")
+    return out
+
+
+def _encoder_update(prob: ReplayProblem, cprob: ReplayProblem, effects: Sequence[str], notes: List[str],
+                    rnd: int) -> Tuple[ReplayProblem, ReplayProblem]:
+    """The loop's encoder floor bootstrapped again on the model of ``cprob`` (the last
+    step's): the replay error an encoder causes depends on the model (a gear with play
+    hits its flanks when the replayed motor angle says, so a 12-bit encoder at 200 Hz that
+    leaves the nominal model at 1.3 × its noise leaves the true backlash 20-60 ×; a
+    friction law's sign flips with the smoothed velocity). ``prob`` and ``cprob`` take it:
+    the floor stop and the conclusion judge the newest model against its own floor. A
+    change above :data:`ENCODER_NOTE` goes to ``notes``; a failure keeps the floor used."""
+    old = cprob.encoder_floor
+    try:
+        e = cprob.encoder_bootstrap()
+        prob, cprob = prob.with_encoder_sigma(e), cprob.with_encoder_sigma(e)
+    except Exception as ex:  # noqa: BLE001 - a check: the loop goes on in the floor it had
+        notes.append(f"round {rnd}: bootstrapping the encoder floor again failed ({type(ex).__name__}: {ex}); the floor used stands")
+        return prob, cprob
+    new = cprob.encoder_floor
+    moved = {c: new[c] / old[c] for c in new if old.get(c, 0) > 0 and not 1 / ENCODER_NOTE <= new[c] / old[c] <= ENCODER_NOTE}
+    if moved:
+        txt = ", ".join(f"{c} {old[c]:.3g} → {new[c]:.3g}" for c in sorted(moved, key=lambda c: -abs(math.log(moved[c])))[:4])
+        notes.append(f"round {rnd}: the encoder floor bootstrapped again on the model with {' + '.join(effects) or 'nothing'} "
+                     f"(the replay error the encoder's own error causes, × each channel's noise): {txt}")
+    return prob, cprob
+
+
+def _n_params(fitted: Mapping[str, Sequence[str]], flat: np.ndarray) -> int:
+    """The number of fitted parameter entries of the effects ``fitted`` ({effect: names})
+    in the model of effect vector ``flat`` (entries its structure leaves out not counted)."""
+    return sum(1 for e, ps in fitted.items() for pi in est.free_params(e, list(ps) or None) if not left_out(flat, *pi))
+
+
+def _beats(new: ReplayProblem, fitted_new: Mapping[str, Sequence[str]], cur: ReplayProblem, fitted_cur: Mapping[str, Sequence[str]]) -> Tuple[bool, str]:
+    """Whether the model of ``new`` beats the (non-nested) model of ``cur`` on the same run:
+    its BIC gain (likelihood ratio on the training samples less ln n_eff per extra fitted
+    parameter) passes the significance threshold, and it lowers the held-out error too; and
+    the numbers, as text."""
+    z_new = new.residuals(new.nominal_simulation())
+    z_cur = cur.residuals(cur.nominal_simulation())
+    if z_new.shape != z_cur.shape:
+        return False, "not comparable (different output grids)"
+    lr, ne = est.log_ratio(cur, z_cur, z_new, cur.train)
+    gain = lr - (_n_params(fitted_new, new.model.effects_flat) - _n_params(fitted_cur, cur.model.effects_flat)) * math.log(ne)
+    v_new, v_cur = new.error(mask=new.validation)[0], cur.error(mask=cur.validation)[0]
+    ok = bool(gain > SCORE_THRESHOLD and v_new < v_cur)
+    return ok, f"BIC gain {gain:.1f} (threshold {SCORE_THRESHOLD:g}), held-out error {v_cur:.3g} → {v_new:.3g}"
+
+
+def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, added: List[str], fitted: Dict[str, List[str]],
+              effects: Optional[Sequence[str]], diags: Sequence[Diagnosis], threads: int, max_iter: int,
+              progress: Optional[Progress], log: Optional[List[str]] = None) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]]]]:
+    """Whether ``effect`` (added earlier) is better replaced by another candidate: the
+    model of ``cprob`` without it is diagnosed (the other added effects refitted with each
+    candidate), its best significant candidate put in its place and every added effect
+    refitted; the swap is returned (the new effect, model, problem, intervals and fitted
+    names) when it beats the current model by the significance threshold in BIC (likelihood
+    ratio less ln n_eff per extra parameter, the effects being non-nested) and lowers the
+    held-out error too; else ``None``. A failure keeps the current model. ``log``: a line
+    saying what was tried and why it was (not) kept is appended."""
+    others = [e for e in added if e != effect]
+    pool = [e for e in (effects or fx.EFFECT_NAMES) if e not in added]
+    if not others or not pool:
+        return None
+    what = f"swap of {effect} (candidates {', '.join(pool)})"
+    try:
+        # the others refitted without it first: fitted beside a stand-in they are biased
+        # (a payload fitted beside a backlash standing in for drag was 0.69 × the truth)
+        _, bprob, _ = _refit_stable(prob.with_model(cprob.model.without_effect(effect)), others, {e: fitted[e] for e in others}, max_iter)
+        bprob = fit_unseen_motion(bprob)
+    except KeyboardInterrupt:
+        raise
+    except Exception as ex:  # noqa: BLE001 - the current model stands
+        _note(log, f"{what}: failed refitting {', '.join(others)} without it ({type(ex).__name__}: {ex}); the model stands")
+        return None
+    best = _best_added(prob, run, bprob, others, {e: list(fitted[e]) for e in others}, pool, diags, threads, max_iter, progress, cprob, fitted,
+                       log=log, what=what)
+    if best is None:
+        return None
+    c, m2, p2, ci2, nf, _ = best
+    order = [c if e == effect else e for e in added]
+    return c, m2, p2, ci2, {e: nf[e] for e in order}
+
+
+def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept: List[str], fitted: Dict[str, List[str]], pool: List[str],
+                diags: Sequence[Diagnosis], threads: int, max_iter: int,
+                progress: Optional[Progress], cur: ReplayProblem,
+                fitted_cur: Mapping[str, Sequence[str]], log: Optional[List[str]] = None, what: str = "",
+                joint: bool = False) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+    """The model of ``base`` with the best significant candidate among ``pool`` added (the
+    candidates diagnosed with the effects ``kept``, fitted names ``fitted``, refitted with
+    each; the best added and everything refitted jointly), if it beats the current model
+    ``cur`` (:func:`_beats`). Returns (its name, the model, its problem with its own unseen
+    motion, intervals, fitted names, the diagnosis), or ``None``: no candidate significant,
+    the current model better, or a failure (the current model stands). ``log``: a line
+    saying what (``what``) was tried and why it was (not) kept is appended. ``joint``: as
+    :func:`diagnose`'s (every candidate fitted jointly with ``kept`` from its seeds)."""
+    what = what or "candidates " + ", ".join(pool)
+    try:
+        # only the best candidate is taken: the cheap screen picks the one that gets the full fit
+        d = diagnose(base.model, run, effects=pool, threads=threads, max_iter=max_iter, problem=base, progress=progress, refit=fitted,
+                     starts=_prior_fits(diags), screen=1, joint=joint)
+        s = d.best
+        if s is None:
+            _note(log, f"{what}: no candidate significant; the model stands")
+            return None
+        nf = dict(fitted)
+        nf[s.effect] = list(s.fitted)
+        m2, p2, ci2 = _refit_stable(prob.with_model(s.apply(base.model)), list(kept) + [s.effect], nf, max_iter)
+        p2 = fit_unseen_motion(p2)
+        ok, why = _beats(p2, nf, cur, fitted_cur)
+        _note(log, f"{what}: {s.effect} {'kept' if ok else 'not kept'} ({why})")
+        if not ok:
+            return None
+    except KeyboardInterrupt:
+        raise
+    except Exception as ex:  # noqa: BLE001 - the current model stands
+        _note(log, f"{what}: failed ({type(ex).__name__}: {ex}); the model stands")
+        return None
+    return s.effect, m2, p2, ci2, nf, d
+
+
+def _step(cprob: ReplayProblem, added: Sequence[str], ci: Dict[str, Dict[str, List[float]]], rnd: int, **kw: Any) -> HistoryStep:
+    """A step of the loop: the model of ``cprob`` with the effects ``added``, its error on
+    every sample and on the held-out ones, per channel and overall."""
+    err, per = cprob.error()
+    verr, vper = cprob.error(mask=cprob.validation)
+    m = cprob.model
+    return HistoryStep(list(added), {e: m.effects.get(e, {}) for e in added}, err, per, m, validation_error=verr, ci95=ci,
+                       unseen_compliance=cprob.compliance.tolist(), round=rnd, validation_channel_error=vper, **kw)
+
+
+def _note(log: Optional[List[str]], line: str) -> None:
+    if log is not None:
+        log.append(line)
+
+
+def _extras(effect: str, names: Sequence[str]) -> List[str]:
+    """The names among ``names`` that are not fitted by ``effect``'s base law (a richer
+    variant's extra parameters)."""
+    base = {p.name for p in fx.EFFECTS[effect].fit_params}
+    return [k for k in names if k not in base]
+
+
+def _try_base_law(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, added: List[str], fitted: Dict[str, List[str]],
+                  effects: Optional[Sequence[str]], diags: Sequence[Diagnosis], threads: int, max_iter: int,
+                  progress: Optional[Progress], log: Optional[List[str]] = None,
+                  more: Sequence[str] = ()) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+    """Whether ``effect``, added with a richer variant's extra parameters, is better back at
+    its base law (the extras neutral) with another effect added: the added effects are
+    refitted with ``effect`` at its base law, that model is diagnosed, and its best
+    significant candidate added and refitted with them. Returned (the new effect, model,
+    problem, intervals, fitted names and the diagnosis) when it beats the current model by
+    the significance threshold in BIC and lowers the held-out error too; else ``None``.
+    The candidates ``effects`` are screened from their fits in ``diags``; if none is kept,
+    the candidates ``more`` are tried, each fitted jointly with the added effects from its
+    seeds (their error was taken by the extras, and the effect's base-law value refitted
+    without them is off: a torsion fitted with that payload held finds nothing)."""
+    extras = _extras(effect, fitted.get(effect, []))
+    pool = [e for e in (fx.EFFECT_NAMES if effects is None else effects) if e not in added]
+    more = [e for e in more if e not in added and e not in pool]
+    if not extras or not (pool or more):
+        return None
+    what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(pool or more)})"
+    try:
+        params = dict(cprob.model.effects.get(effect, {}))
+        params.update({k: [fx.EFFECTS[effect].params[k].neutral] * fx.EFFECTS[effect].params[k].length for k in extras})
+        nf = {e: (list(fitted[e]) if e != effect else [k for k in fitted[e] if k not in extras]) for e in added}
+        _, pb, _ = _refit_stable(prob.with_model(cprob.model.with_effects({effect: params})), added, nf, max_iter)
+        pb = fit_unseen_motion(pb)
+        z_b, z_c = pb.residuals(pb.nominal_simulation()), cprob.residuals(cprob.nominal_simulation())
+        if z_b.shape == z_c.shape and est.log_ratio(cprob, z_b, z_c, cprob.train)[0] < SCORE_THRESHOLD:
+            # the extras explain nothing: the round just done already diagnosed this model
+            _note(log, f"{what}: not tried, the extras explain nothing (likelihood ratio below {SCORE_THRESHOLD:g})")
+            return None
+    except KeyboardInterrupt:
+        raise
+    except Exception as ex:  # noqa: BLE001 - the current model stands
+        _note(log, f"{what}: failed refitting at the base law ({type(ex).__name__}: {ex}); the model stands")
+        return None
+    out = _best_added(prob, run, pb, added, nf, pool, diags, threads, max_iter, progress, cprob, fitted, log=log, what=what) if pool else None
+    if out is None and more:
+        what = f"{effect} back at its base law ({', '.join(extras)} neutral; candidates {', '.join(more)}, each fitted with {', '.join(added)} from its seeds)"
+        out = _best_added(prob, run, pb, added, nf, more, [], threads, max_iter, progress, cprob, fitted, log=log, what=what, joint=True)
+    return out
+
+
+def _significant_in(diags: Sequence[Diagnosis]) -> List[str]:
+    """The effects significant in any of the diagnoses ``diags``, in order of first sight."""
+    out: List[str] = []
+    for d in diags:
+        for s in d.suspects:
+            if s.significant and s.effect not in out:
+                out.append(s.effect)
+    return out
+
+
+def _prior_fits(diags: Sequence[Diagnosis]) -> Dict[str, Dict[str, List[float]]]:
+    """Each effect's most recent tested fit over the rounds ``diags`` (its fitted
+    parameters only), offered as one more start in the next round."""
+    out: Dict[str, Dict[str, List[float]]] = {}
+    for d in diags:
+        for s in d.suspects:
+            if s.tested and math.isfinite(s.score) and s.fitted:
+                out[s.effect] = {k: list(s.params[k]) for k in s.fitted if k in s.params}
+    return out
+
+
+def _still_needed(prob: ReplayProblem, effect: str, params: Sequence[str]) -> bool:
+    """Whether the model of ``prob`` needs ``effect``, by the rules that would have added it:
+    a play narrower than the encoder resolves (:func:`unresolved_play`) is not needed; nor
+    is an effect without which the model is at its floor (:func:`model_at_floor`, with its
+    own unseen motion); otherwise the likelihood ratio of the model with it against the
+    model without it (its parameters neutral, nothing refitted, so the test keeps an
+    effect when in doubt) must pass the significance threshold."""
+    if unresolved_play(prob, effect, prob.model.effects_flat):
+        return False
+    try:
+        without = fit_unseen_motion(prob.with_model(prob.model.without_effect(effect)))
+        z_wo = without.residuals(without.nominal_simulation())
+        e_wo, per_wo = without.error(z_wo)
+    except Exception:  # noqa: BLE001 - if it cannot be removed, keep it
+        return True
+    if model_at_floor(without, e_wo, per_wo):
+        return False
+    z = prob.residuals(prob.nominal_simulation())
+    lr, neff = est.log_ratio(prob, z_wo, z, prob.train)
+    k = len(est.free_params(effect, list(params) or None))
+    return lr - k * math.log(neff) > SCORE_THRESHOLD
+
+
+def _refit_stable(prob: ReplayProblem, added: List[str], fitted: Dict[str, List[str]], max_iter: int) -> Tuple["Model", ReplayProblem, Dict[str, Dict[str, List[float]]]]:
+    """:func:`_refit`, at half the step (up to :data:`STEP_HALVINGS` times) when the
+    refitted model leaves the step's stability region (a stiffness the joint refit moved
+    beyond what the candidate's step was chosen for, or a pose where a mode is faster)."""
+    for k in range(STEP_HALVINGS + 1):
+        try:
+            out = _refit(prob, added, fitted, max_iter)
+            out[1].error()  # the refitted model runs at this step
+            return out
+        except StepTooLargeError:
+            if k == STEP_HALVINGS:
+                raise
+            prob = prob.with_model(prob.model.with_dt(0.5 * prob.model.dt))
+    raise AssertionError("unreachable")
+
+
+def _refit(prob: ReplayProblem, added: List[str], fitted: Dict[str, List[str]], max_iter: int) -> Tuple["Model", ReplayProblem, Dict[str, Dict[str, List[float]]]]:
+    """Refit every fitted parameter of the added effects jointly, from their current values."""
+    model = prob.model
+    flat = model.effects_flat
+    free = [pi for e in added for pi in est.free_params(e, fitted.get(e) or None) if not left_out(flat, *pi)]
+    x0 = np.array([flat[p.offset + i] for p, i in free])
+    out = est.fit(prob, flat, free, x0, max([max_iter] + [MIN_ITER.get(e, 0) for e in added]))
+    new = model.with_effects({e: est.params_dict(e, out.flat) for e in added})
+    nprob = prob.with_model(new)
+    _, ne = est.log_ratio(prob, out.z, out.z, prob.train)
+    half, _ = est.uncertainty(out, free, [f"{p.effect}.{p.name}[{i}]" for p, i in free], ne)
+    ci: Dict[str, Dict[str, List[float]]] = {}
+    for (p, i), h in zip(free, half):
+        ci.setdefault(p.effect, {}).setdefault(p.name, [math.nan] * p.length)[i] = float(h)
+    return new, nprob, ci

@@ -1,0 +1,174 @@
+"""The diagnosis's rules and settings: significance and floor thresholds, the richer variants
+of each effect, the structures and steps its candidates are tried at, and the floor tests."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Dict, List, Mapping
+
+from .. import estimate as est
+from ..problem import ReplayProblem
+
+
+SCORE_THRESHOLD = est.SCORE_THRESHOLD
+"""BIC improvement (with the effective sample count) above which an effect is significant
+(:data:`popup.estimate.SCORE_THRESHOLD`)."""
+
+
+MIN_EXPLAINED = 0.4
+"""Smallest share of the systematic error (``1 − S²_after/S²_before``) a significant effect
+explains. On data no model reproduces exactly the likelihood ratio overstates significance
+(the residual left is systematic, not noise), and an effect can take a small bite of a
+misfit it does not explain: on a MuJoCo nominal run at 2 kHz with 3 × quieter sensors
+(a fixed 0.45 σ₀ encoder/replay misfit left, benchmarks/README.md, session 13) backlash
+with a 3 µrad gap scored 5353 for 24 % of a 0.71 systematic error, then a −0.2 g payload
+for 20 %. Every hidden effect the families found explained at least 79 % (a near torsion
+at the fit's cap, 1.90 → 0.868 noise units)."""
+
+
+STABILITY_MARGIN = 0.5
+"""A candidate runs with a step at most this fraction of its linearised stability limit."""
+
+
+AT_FLOOR = 0.3
+"""Systematic error [noise units] below which a model is said to be at the noise floor
+(the total error within 5 % of the noise: sqrt(1 + 0.3²) = 1.044)."""
+
+
+JOINT_TOP = 3
+"""In a round with effects already added, the number of best-screened candidates refitted
+jointly with them (the others keep their screened fit, earlier effects held)."""
+
+
+SPIKE_SHARE = 0.5
+"""Share of a channel's excess above which the unexplained error names its isolated spikes
+(:meth:`ReplayProblem.spikes`), for a channel above :data:`FLOOR_MULTIPLE` × its noise (a
+replay at the floor can have one: a friction reversal a sample early is a one-sample step)."""
+
+
+FLOOR_MULTIPLE = 1.2
+"""After an effect was added, :func:`improve` stops when the systematic error is at most
+:data:`AT_FLOOR` and every channel is within this multiple of its noise (a systematic part of
+at most 0.66 σ in any channel). The noise floors are themselves estimated from the run
+(coloured noise, jittered stamps): a popup run refitted to its truth's own law (S = 0.065)
+had channels from 0.955 to 1.118 × their floors, so effects that would take such a model
+from, say, 0.15 to 0.08 noise units are fitting that uncertainty, not physics."""
+
+
+#: Effects that move a lightly damped resonance (or a link side rattling in its gap): fitted on
+#: a short horizon first, then on doubled horizons from that optimum (an extra start).
+SHORT_FIRST = {"higher_bending_modes", "torsion", "payload_mass", "wrinkling", "pressure_leak", "air_drag", "backlash"}
+
+
+#: Effects whose per-joint seeded parameters are also swept joint by joint (on the short horizon).
+COORDINATE_SEEDS = {"backlash"}
+
+
+COORDINATE_STEP = 1.03
+"""Ratio between neighbouring values of the joint-by-joint seed sweep (``COORDINATE_SEEDS``)."""
+
+
+SHORT_HORIZON_S = 2.5
+"""Length [s] of the short horizon (at least 20 % of the run) of the first fit of an effect
+that moves a resonance; the continuation then doubles it until the run's length."""
+
+
+#: Effects whose fit needs more iterations than ``max_iter`` (coupled, lightly damped modes).
+MIN_ITER: Dict[str, int] = {"torsion": 40, "higher_bending_modes": 25, "wrinkling": 20}
+
+
+#: Structural settings used when an effect is tried (its discrete parameters), and the
+#: parameter values at which its stability limit is taken (the stiffest seed).
+STRUCTURE: Dict[str, Dict[str, Any]] = {
+    "higher_bending_modes": {"segments": [2.0, 2.0]},
+    "torsion": {"k_t": [200.0, 200.0]},
+}
+
+
+STIFFEST: Dict[str, Dict[str, Any]] = {
+    "higher_bending_modes": {"k_scale": [5.0, 5.0]},
+    "torsion": {"k_t": [est.BOUNDS[("torsion", "k_t")][1]] * 2, "c_t": [2.0, 2.0]},
+}
+
+
+VARIANTS: Dict[str, List[Dict[str, Any]]] = {
+    "joint_friction": [{"name": "Stribeck", "extra": ["tau_s", "v_s"], "seeds": [{"tau_s": 0.5, "v_s": 0.05}, {"tau_s": 1.5, "v_s": 0.1}, {"tau_s": 1.0, "v_s": 0.02}]},
+                       # how sharply the friction reverses (a gear's presliding width): a law with a
+                       # sharper sign than the default is otherwise mimicked by a Stribeck bump at
+                       # v_s ≈ v_eps (MuJoCo friction with a 3 mrad/s sign: τ_s 6.6 N·m for a true 1.07)
+                       {"name": "sign width", "extra": ["v_eps"], "seeds": [{"v_eps": 0.003}, {"v_eps": 0.001}, {"v_eps": 0.03}]},
+                       {"name": "Stribeck and sign width", "extra": ["tau_s", "v_s", "v_eps"],
+                        "seeds": [{"tau_s": 0.3, "v_s": 0.05, "v_eps": 0.003}, {"tau_s": 0.3, "v_s": 0.05, "v_eps": 0.001},
+                                  {"tau_s": 1.0, "v_s": 0.1, "v_eps": 0.003}, {"tau_s": 0.5, "v_s": 0.05, "v_eps": 0.03}]}],
+    # the springs along a link: equal (the default split) or a stiffer root, as in a
+    # continuous cantilever (4:1 for 2 segments gives its tip rotation as well as its deflection)
+    "higher_bending_modes": [{"name": "3 segments", "structure": {"segments": [3.0, 3.0]}},
+                             {"name": "stiffer root (cantilever split)", "extra": ["root_ratio"],
+                              "seeds": [{"root_ratio": 4.0}, {"root_ratio": 2.0}, {"root_ratio": 0.6}]}],
+    "payload_mass": [{"name": "centre-of-mass offset", "extra": ["com_offset_m"]}],
+    # how fast a link side crosses its gap depends on the gear's link-side inertia
+    "backlash": [{"name": "fitted link-side inertia", "extra": ["inertia"], "seeds": [{"inertia": 0.003}, {"inertia": 0.03}, {"inertia": 0.1}, {"inertia": 0.3}]},
+                 # a link side held by its bearing's friction, moved only by the flanks: another
+                 # law, not a refinement, so it is tried even when the free gear is not significant
+                 {"name": "held link side (play operator)", "structure": {"held": [1.0, 1.0, 1.0]}, "alternative": True},
+                 # a compliant gear: its flanks a unilateral spring-damper (the elasto-backlash
+                 # law of Modelica and Simscape), which also carries the gear's own compliance
+                 # while it pushes; run at the step of its stiffest plausible flank
+                 {"name": "compliant flanks", "extra": ["contact_k", "contact_c"],
+                  "structure": {"contact_k": [1e4, 1e4, 1e4], "contact_c": [5.0, 5.0, 5.0]},
+                  "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [est.BOUNDS[("backlash", "contact_c")][1]] * 3},
+                  "seeds": [{"contact_k": 3e3, "contact_c": 3.0}, {"contact_k": 3e4, "contact_c": 10.0}, {"contact_k": 1e5, "contact_c": 30.0}]}],
+    "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
+                {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
+}
+"""Richer variants tried when an effect is significant: ``extra`` parameters fitted with
+the base ones (from the base fit), or another ``structure``; an ``alternative`` (another
+law for the same effect) is tried whether the base is significant or not."""
+
+
+Progress = Callable[[Dict[str, Any]], None]
+
+
+#: Effect parameters [rad per motor joint] that are play in a joint: a play narrower than
+#: :data:`PLAY_READINGS` encoder readings (:attr:`ReplayProblem.encoder_width`) is not a finding.
+PLAY_PARAMS = {"backlash": "gap"}
+
+
+PLAY_READINGS = 0.5
+"""Readings a play must span (on at least one joint) to be a finding: half a reading, the
+quantisation of the replayed angle itself. It was 2 before the servo's unseen motion was
+part of the replay (:mod:`popup.unseen`): a play of a quarter to one reading then stood in
+for that motion on MuJoCo nominal runs with coarse encoders and quiet sensors. With the
+motion in the replay, twelve such runs (12- and 14-bit, trapezoid, lab and multisine, 200
+and 500 Hz, noise × 0.35) fitted with the rule off gave a play of 0 on 35 of 36 joints
+(0.11 reading on one, score below zero; six popup-engine runs likewise, none significant), while a MuJoCo run with a true play of 1.1-1.8
+readings (12-bit, 200 Hz trapezoid) was refused by the old rule although the play took
+the error from 2.05 to 0.30 noise units, every channel to within 1.2 × its noise
+(benchmarks/README.md, session 23)."""
+
+
+#: A channel's noise floor estimated from a refitted model's residual replaces the one the
+#: loop used when it differs by more than this factor, either way (the estimator's own
+#: scatter is a few %).
+NOISE_RECHECK = 1.2
+
+
+#: A change of a channel's encoder floor (as a multiple of its noise) by more than this
+#: factor, either way, is noted when the loop bootstraps it again on a refitted model.
+ENCODER_NOTE = 1.1
+
+
+def model_at_floor(prob: ReplayProblem, error: float, per: Mapping[str, float]) -> bool:
+    """Whether a model with systematic error ``error`` and noise multiples ``per`` is at its
+    floor: at most :data:`AT_FLOOR` above the noise and the encoder's replay error
+    (:meth:`ReplayProblem.floor_error`), and every channel within :data:`FLOOR_MULTIPLE` of
+    that floor. Nothing is added then: what is left is below what the run resolves."""
+    fm = [v for v in prob.floor_multiples(dict(per)).values() if math.isfinite(v)]
+    if not fm:
+        return False
+    s = error if error <= AT_FLOOR else prob.floor_error(dict(per))
+    return bool(s <= AT_FLOOR and max(fm) <= FLOOR_MULTIPLE)
+
+
+#: Halvings of the step tried when a refitted model fails the step check.
+STEP_HALVINGS = 3
