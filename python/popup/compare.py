@@ -113,8 +113,8 @@ import numpy as np
 
 from .exceptions import InputError, MeasuredRunError
 from .io import MeasuredRun
-from .model import _names, _scalar
-from .problem import DEFAULT_CHANNELS, ReplayProblem, Shifted
+from .model import check_names, check_scalar
+from .problem import DEFAULT_CHANNELS, ReplayProblem
 from .results import UNITS, SimResult
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -263,9 +263,9 @@ class Comparison:
         """``"overlay"``: measured and simulated per channel, one panel per channel group;
         ``"residuals"``: residual time series, autocorrelation with its 99 % band,
         residual–input cross-correlation, and residual spectrum. Returns the figure."""
-        from .plot import _plt
+        from .plot import pyplot
 
-        plt = _plt()
+        plt = pyplot()
         chans = list(channels) if channels is not None else self.channels
         unknown = [c for c in chans if c not in self.channels]
         if unknown:
@@ -388,9 +388,9 @@ def compare(
             f"{min(len(run), _MAX_WINDOWS)} (one sample per window, and at most {_MAX_WINDOWS} rows in the window table)"
         )
     if channels is not None:
-        channels = _names("channels", channels)
+        channels = check_names("channels", channels)
     if sample_rate is not None:
-        sample_rate = _scalar("sample_rate", sample_rate, "Hz")
+        sample_rate = check_scalar("sample_rate", sample_rate, "Hz")
         if not (math.isfinite(sample_rate) and sample_rate > 0):
             raise InputError(f"compare: input sample_rate: {sample_rate!r} Hz must be finite and > 0")
     L = int(lags)

@@ -25,7 +25,7 @@ import tomli_w
 
 from . import _core
 from .exceptions import InputError
-from .results import CHANNELS, UNITS, WrinkleAlarm, _Channels
+from .results import CHANNELS, UNITS, WrinkleAlarm, ChannelTable
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -371,7 +371,7 @@ class Event(NamedTuple):
     """Guard that fired, fault details, contact location..."""
 
 
-class _Control(_Channels):
+class _Control(ChannelTable):
     control: np.ndarray
 
     def control_channel(self, name: str) -> np.ndarray:

@@ -89,10 +89,10 @@ def _check_args(
 ) -> Tuple[Optional[List[str]], Optional[float]]:
     """Refuse arguments of the wrong kind with an InputError naming the argument (before
     anything is simulated); return ``channels`` and ``sample_rate`` normalised."""
-    from .model import _names, _scalar, _threads, check_count
+    from .model import check_names, check_scalar, check_threads, check_count
 
     if not isinstance(params, str):
-        _names("params", params)
+        check_names("params", params)
     for what, d in (("bounds", bounds), ("scale", scale), ("x0", x0), ("grid", grid)):
         if d is not None and not isinstance(d, Mapping):
             raise InputError(f"input {what}: expected a mapping of parameter names ('effect.name[i]') to values, got {d!r}")
@@ -101,11 +101,11 @@ def _check_args(
                 raise InputError(f"input {what}: key {k!r} is not a parameter name ('effect.name[i]')")
     est.check_max_iter(max_iter)
     check_count("starts", starts, 1, 10**3)
-    _threads(threads)
-    ch = None if channels is None else _names("channels", channels)
+    check_threads(threads)
+    ch = None if channels is None else check_names("channels", channels)
     rate = None
     if sample_rate is not None:
-        rate = _scalar("sample_rate", sample_rate, "Hz")
+        rate = check_scalar("sample_rate", sample_rate, "Hz")
         if not (np.isfinite(rate) and rate > 0):
             raise InputError(f"input sample_rate: {rate!r} Hz must be finite and > 0")
     return ch, rate

@@ -436,10 +436,10 @@ def _load_toml(path: Path) -> Dict[str, Any]:
         raise MeasuredRunError(f"{path}: not UTF-8 text (byte {e.start}); TOML files are UTF-8") from None
     except OSError as e:
         raise MeasuredRunError(f"{path}: cannot be read ({e.strerror})") from None
-    return _parse_toml(text, str(path))
+    return parse_toml(text, str(path))
 
 
-def _parse_toml(text: str, where: str, error: Type[MeasuredRunError] = MeasuredRunError) -> Dict[str, Any]:
+def parse_toml(text: str, where: str, error: Type[MeasuredRunError] = MeasuredRunError) -> Dict[str, Any]:
     """Parse TOML text; a syntax error raises ``error`` naming ``where`` and the line."""
     try:
         return tomllib.loads(text)

@@ -625,9 +625,9 @@ def _experiment(md: Optional[Dict[str, str]], path: Path) -> Dict[str, Any]:
     if md is None:
         return {}
     if "toml" in md:
-        from .io import _parse_toml
+        from .io import parse_toml
 
-        return _parse_toml(md["toml"], f"{path}: metadata record experiment, key toml", LogFileError)
+        return parse_toml(md["toml"], f"{path}: metadata record experiment, key toml", LogFileError)
     return {k: _toml_value(v) for k, v in md.items()}
 
 

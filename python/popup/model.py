@@ -113,7 +113,7 @@ def _as_float_array(name: str, x: Any, ndim: Optional[int]) -> np.ndarray:
     return a
 
 
-def _names(name: str, x: Any) -> List[str]:
+def check_names(name: str, x: Any) -> List[str]:
     """A list of names (one string counts as one name), or an InputError naming ``name``."""
     if isinstance(x, str):
         return [x]
@@ -134,7 +134,7 @@ def _flag(name: str, x: Any) -> bool:
     raise InputError(f"input {name}: expected True or False, got {x!r}")
 
 
-def _scalar(name: str, x: Any, unit: str) -> float:
+def check_scalar(name: str, x: Any, unit: str) -> float:
     """One number of argument ``name``, or an InputError naming it."""
     try:
         if np.ndim(x) != 0:
@@ -163,13 +163,14 @@ def _pair(name: str, x: Any) -> Tuple[float, float]:
 
 
 def _duration(x: Any) -> float:
-    d = _scalar("duration", x, "s")
+    d = check_scalar("duration", x, "s")
     if not (math.isfinite(d) and d >= 0):
         raise InputError(f"input duration: {d!r} s must be finite and >= 0")
     return d
 
 
-def _threads(x: Any) -> int:
+def check_threads(x: Any) -> int:
+    """A thread count (0 = all cores), or an InputError naming ``threads``."""
     if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, np.integer)):
         raise InputError(f"input threads: expected an integer (0 = all cores), got {x!r}")
     if not -(2**63) <= int(x) < 2**63:  # the core takes a 64-bit count and refuses absurd ones itself
@@ -186,7 +187,7 @@ def check_count(what: str, x: Any, lo: int, hi: int, meaning: str = "") -> int:
 
 
 def _rate(x: Any) -> float:
-    r = _scalar("sample_rate", x, "Hz")
+    r = check_scalar("sample_rate", x, "Hz")
     if not (math.isfinite(r) and r > 0):
         raise InputError(f"input sample_rate: {r!r} Hz must be finite and > 0")
     return r
@@ -248,16 +249,16 @@ class Model:
         disable: Iterable[str] = (),
         _core_model: Optional["_core.Model"] = None,
     ) -> None:
-        dis = _names("disable", disable)
+        dis = check_names("disable", disable)
         if not _flag("gravity", gravity) and "gravity" not in dis:
             dis.append("gravity")
         if _core_model is None:
             if not isinstance(integrator, str):
                 raise InputError(f"input integrator: expected a name (\"rk4\" or \"semi_implicit\"), got {integrator!r}")
-            _core_model = _core.Model(load_arm(arm), dt=_scalar("dt", dt, "s"), integrator=integrator, disable=dis)
+            _core_model = _core.Model(load_arm(arm), dt=check_scalar("dt", dt, "s"), integrator=integrator, disable=dis)
         self._m = _core_model
         spec_defaults = self._defaults()
-        self.payload_kg = _scalar("payload_kg", spec_defaults[0] if payload_kg is None else payload_kg, "kg")
+        self.payload_kg = check_scalar("payload_kg", spec_defaults[0] if payload_kg is None else payload_kg, "kg")
         self.pressure_pa: Tuple[float, float] = _pair("pressure_pa", spec_defaults[1] if pressure_pa is None else pressure_pa)
         # validate now, so a bad payload/pressure fails at construction
         info = self._m.param_data(self.payload_kg, self.pressure_pa)
@@ -694,7 +695,7 @@ class Model:
             iv,
             None if replay else float(duration),  # type: ignore[arg-type]
             1.0 / float(sample_rate),
-            _threads(threads),
+            check_threads(threads),
             _flag("check_step", check_step),
             fx_b,
             None if log is None else os.fspath(log),
@@ -822,7 +823,7 @@ class Model:
             1.0 / float(sample_rate),
             np.ascontiguousarray(g_b),
             fx_b,
-            _threads(threads),
+            check_threads(threads),
             _flag("check_step", check_step),
             "<task>",
         )

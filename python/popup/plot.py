@@ -14,7 +14,9 @@ __all__ = ["plot_result", "plot_batch"]
 _DEFAULT = [["q1", "q2", "q3"], ["ee_x", "ee_y", "ee_z"], ["d11", "d12", "d21", "d22"], ["m1_ratio", "m2_ratio"]]
 
 
-def _plt() -> Any:
+def pyplot() -> Any:
+    """``matplotlib.pyplot``, on the Agg backend where there is no display (imported on
+    first use: matplotlib is needed only to plot)."""
     import matplotlib
 
     if matplotlib.get_backend().lower() not in ("agg", "pdf", "svg") and not _has_display():
@@ -34,7 +36,7 @@ def plot_result(res: "SimResult", channels: Optional[Sequence[str]] = None, *, a
     """One panel per channel group (or per channel when ``channels`` is given)."""
     from .results import UNITS
 
-    plt = _plt()
+    plt = pyplot()
     groups = [[c] for c in channels] if channels else _DEFAULT
     if ax is None:
         fig, axes = plt.subplots(len(groups), 1, sharex=True, figsize=(8, 2.2 * len(groups)), squeeze=False)
@@ -58,7 +60,7 @@ def plot_batch(res: "BatchResult", channel: str, *, ax: Any = None) -> Any:
     """Overlay ``channel`` of every run, labelled by payload and pressures."""
     from .results import UNITS
 
-    plt = _plt()
+    plt = pyplot()
     if ax is None:
         fig, ax = plt.subplots(figsize=(8, 4))
     else:

@@ -49,7 +49,10 @@ class WrinkleAlarm(NamedTuple):
     """Peak |M|/M_w during the episode."""
 
 
-class _Channels:
+class ChannelTable:
+    """Named access to a ``data`` array whose last axis is the measured-run channels
+    (:data:`CHANNELS`): the base of :class:`SimResult` and the controller's results."""
+
     data: np.ndarray
 
     def _cols(self, names: Sequence[str]) -> np.ndarray:
@@ -128,7 +131,7 @@ class _Channels:
 
 
 @dataclass
-class SimResult(_Channels):
+class SimResult(ChannelTable):
     """One simulated run.
 
     Attributes
@@ -176,7 +179,7 @@ class SimResult(_Channels):
 
 
 @dataclass
-class BatchResult(_Channels):
+class BatchResult(ChannelTable):
     """A batch of runs with stacked arrays: every named array has a leading batch axis.
 
     ``errors[b]`` is None for a successful run or the message of its failure (its rows are

@@ -743,9 +743,9 @@ class PUIResult:
         (open circle), ``truth`` (red cross) when given, and for OE the exact numerator
         interval given F̂ (grey bar, right). ``ax``: p axes to draw into. Returns the
         figure."""
-        from .plot import _plt
+        from .plot import pyplot
 
-        plt = _plt()
+        plt = pyplot()
         p = len(self.names)
         if ax is None:
             nc = max(1, min(int(ncols), p))

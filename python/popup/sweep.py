@@ -752,7 +752,7 @@ class SweepResult:
         distribution: Monte Carlo), ``"scatter"`` (metric vs ``x`` per run). Default: a heat
         map for two or more grid axes, a histogram for a pure Monte Carlo sweep, else a line.
         """
-        from .plot import _plt
+        from .plot import pyplot
 
         if metric not in METRICS:
             raise UnknownParameterError(f"unknown metric {metric!r}; metrics are {_METRIC_NAMES}")
@@ -770,7 +770,7 @@ class SweepResult:
                 kind = "line"
         if kind not in ("line", "heatmap", "hist", "scatter"):
             raise SweepError(f"plot: kind must be 'line', 'heatmap', 'hist' or 'scatter', got {kind!r}")
-        plt = _plt()
+        plt = pyplot()
         if ax is None:
             fig, ax = plt.subplots(figsize=(7, 4.5))
         else:
@@ -1165,9 +1165,9 @@ class RobustnessRegion:
     def plot(self, *, ax: Any = None) -> Any:
         """Heat map of peak |M|/M_w over (pressure, payload), the ``limit`` contour and the
         feasible points marked; returns the figure."""
-        from .plot import _plt
+        from .plot import pyplot
 
-        plt = _plt()
+        plt = pyplot()
         if ax is None:
             fig, ax = plt.subplots(figsize=(7, 4.5))
         else:
