@@ -147,6 +147,75 @@ def test_a_failing_round_keeps_what_finished(nominal, friction_run, monkeypatch,
     assert report.exists() and "injected" in report.read_text(encoding="utf-8")
 
 
+def test_an_interrupt_returns_the_rounds_finished_only_when_asked(nominal, friction_run, monkeypatch):
+    """Ctrl-C in round 2: the library call propagates it; with ``stop_on_interrupt`` (the
+    CLI) round 1 is returned, saying where it stopped."""
+    calls = {"n": 0}
+    orig = dgl.diagnose
+
+    def interrupted(*a, **kw):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise KeyboardInterrupt("stopped by the test")
+        return orig(*a, **kw)
+
+    monkeypatch.setattr(dgl, "diagnose", interrupted)
+    for mod in (dgr, dg.rank, dg.conclusion):
+        monkeypatch.setattr(mod, "FLOOR_MULTIPLE", 0.0)  # so that a second round runs
+    with pytest.raises(KeyboardInterrupt):
+        dg.improve(nominal, friction_run, effects=["joint_friction", "payload_mass"], max_rounds=3)
+    calls["n"] = 0
+    h = dg.improve(nominal, friction_run, effects=["joint_friction", "payload_mass"], max_rounds=3, stop_on_interrupt=True)
+    assert not h.complete and h.error == "round 2 interrupted: stopped by the test"
+    assert h.effects == ["joint_friction"] and len(h.steps) == 2 and h.steps[-1].error < 0.5 * h.steps[0].error
+    assert "incomplete" in h.conclusion and h.conclusion.startswith("Added joint_friction")
+
+
+@pytest.mark.parametrize("how", ["SIGTERM", "time limit"])
+def test_the_cli_prints_what_finished_on_sigterm_and_at_its_time_limit(nominal, friction_run, monkeypatch, capsys, how):
+    """The signal arrives while round 2 runs (sent by the patched round itself, so the test
+    does not depend on timing): the JSON of round 1 is printed, exit 1, and the handlers and
+    the timer are put back."""
+    import os
+    import signal
+    import time
+
+    calls = {"n": 0}
+    orig = dgl.diagnose
+    timer = []
+    real_setitimer = signal.setitimer
+    monkeypatch.setattr(signal, "setitimer", lambda which, t, *a: timer.append(t) or real_setitimer(which, 0))
+    sig = signal.SIGTERM if how == "SIGTERM" else signal.SIGALRM
+
+    def round2_signalled(*a, **kw):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            os.kill(os.getpid(), sig)
+            for _ in range(600):  # the handler raises within the first sleep
+                time.sleep(0.05)
+            raise AssertionError("the signal did not stop the round")
+        return orig(*a, **kw)
+
+    monkeypatch.setattr(dgl, "diagnose", round2_signalled)
+    for mod in (dgr, dg.rank, dg.conclusion):
+        monkeypatch.setattr(mod, "FLOOR_MULTIPLE", 0.0)
+    before = (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGALRM))
+    extra = ["--time-limit", "1e4"] if how == "time limit" else []
+    rc = dg.cli_main([str(friction_run.source), "--json", "--effects", "joint_friction,payload_mass", *extra])
+    out = json.loads(capsys.readouterr().out)
+    why = "SIGTERM received" if how == "SIGTERM" else "the time limit of 10000 s was reached"
+    assert rc == 1 and out["complete"] is False and out["error"] == f"round 2 interrupted: {why}"
+    assert [st["effects"] for st in out["history"]] == [[], ["joint_friction"]]
+    assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGALRM)) == before
+    assert timer == ([1e4, 0] if how == "time limit" else [])
+
+
+def test_a_bad_time_limit_is_refused(friction_run, capsys):
+    for bad in ("0", "-3", "nan", "inf"):
+        assert dg.cli_main([str(friction_run.source), "--json", "--time-limit", bad]) == 2
+        assert "--time-limit" in capsys.readouterr().err
+
+
 def test_an_effect_that_cannot_be_tried_is_named(nominal, friction_run, monkeypatch):
     orig = dgc._fit_candidate
 

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import signal
 import sys
+import threading
 import time
-from typing import Any, Dict, Sequence
+from typing import Any, Callable, Dict, Iterator, Optional, Sequence
 
+from ..exceptions import InputError
 from ..problem import ERROR_DEFINITION
 from .loop import improve
 
@@ -36,12 +40,47 @@ class TerminalProgress:
         self.stream.flush()
 
 
+@contextlib.contextmanager
+def _interrupts(time_limit: Optional[float]) -> Iterator[None]:
+    """SIGTERM, and SIGALRM after ``time_limit`` seconds, raise ``KeyboardInterrupt`` (with
+    the reason) in the main thread while the loop runs, as Ctrl-C does: :func:`improve`
+    then returns the rounds finished. Elsewhere (another thread, no SIGALRM) nothing is
+    installed and a time limit is refused."""
+    if threading.current_thread() is not threading.main_thread():
+        if time_limit is not None:
+            raise InputError("input --time-limit: only available in the main thread")
+        yield
+        return
+
+    def stop(why: str) -> Callable[[int, Any], None]:
+        def handler(signum: int, frame: Any) -> None:
+            raise KeyboardInterrupt(why)
+
+        return handler
+
+    old = {signal.SIGTERM: signal.signal(signal.SIGTERM, stop("SIGTERM received"))}
+    if time_limit is not None:
+        if not hasattr(signal, "setitimer"):
+            signal.signal(signal.SIGTERM, old[signal.SIGTERM])
+            raise InputError("input --time-limit: not available on this platform (no SIGALRM)")
+        old[signal.SIGALRM] = signal.signal(signal.SIGALRM, stop(f"the time limit of {time_limit:g} s was reached"))
+        signal.setitimer(signal.ITIMER_REAL, time_limit)
+    try:
+        yield
+    finally:
+        if time_limit is not None:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+
 def cli_main(argv: Sequence[str]) -> int:
     """``popup diagnose RUN [--json] [--report out.html] ...``: load the run, compare,
     rank every effect, add the significant ones in turn (refitting), print the suspects
     and the error fall (or one JSON object with ``--json``). Exit 0 when complete, 1 when a
-    round failed (what finished is still printed and reported, with the error), 2 on bad
-    input (the message names what was wrong)."""
+    round failed or was interrupted (Ctrl-C, SIGTERM or ``--time-limit``: what finished is
+    still printed and reported, with the error), 2 on bad input (the message names what
+    was wrong), 130 when interrupted before the first round began."""
     import argparse
 
     from ..exceptions import PopupError
@@ -58,7 +97,12 @@ def cli_main(argv: Sequence[str]) -> int:
     ap.add_argument("--rank-at-floor", action="store_true",
                     help="fit and rank every effect even when the model is at its floor (noise and encoder); by default they are not tried")
     ap.add_argument("--no-progress", action="store_true", help="no progress line on stderr (it is off anyway with --json or when stderr is not a terminal)")
+    ap.add_argument("--time-limit", type=float, metavar="SECONDS",
+                    help="stop after this many seconds and print the rounds finished (as on Ctrl-C or SIGTERM), exit 1")
     a = ap.parse_args(list(argv))
+    if a.time_limit is not None and not (math.isfinite(a.time_limit) and a.time_limit > 0):
+        print(f"popup diagnose: error: input --time-limit: {a.time_limit} must be a positive number of seconds", file=sys.stderr)
+        return 2
     show = not a.json and not a.no_progress and sys.stderr.isatty()
     bar = TerminalProgress() if show else None
     try:
@@ -66,13 +110,19 @@ def cli_main(argv: Sequence[str]) -> int:
         model = run.model()
         effects = [e.strip() for e in a.effects.split(",")] if a.effects else None
         channels = [c.strip() for c in a.channels.split(",")] if a.channels else None
-        h = improve(model, run, max_rounds=a.max_rounds, effects=effects, channels=channels, threads=a.threads, progress=bar,
-                    rank_at_floor=a.rank_at_floor)
+        with _interrupts(a.time_limit):
+            h = improve(model, run, max_rounds=a.max_rounds, effects=effects, channels=channels, threads=a.threads, progress=bar,
+                        rank_at_floor=a.rank_at_floor, stop_on_interrupt=True)
     except (PopupError, FileNotFoundError, NotADirectoryError) as e:
         if bar is not None:
             bar.close()
         print(f"popup diagnose: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as e:  # in the set-up, before any round: nothing to print
+        if bar is not None:
+            bar.close()
+        print(f"popup diagnose: interrupted before the first round: {e or 'KeyboardInterrupt'}", file=sys.stderr)
+        return 130
     if bar is not None:
         bar.close()
     h.run = a.run

@@ -37,13 +37,17 @@ def improve(
     max_iter: int = 15,
     progress: Optional[Progress] = None,
     rank_at_floor: bool = False,
+    stop_on_interrupt: bool = False,
 ) -> History:
     """The loop: diagnose, add the top significant effect, refit every added effect
     jointly, diagnose again; until no effect is significant or ``max_rounds``.
 
     Nothing is lost: a failure in round k returns rounds 1..k−1 with ``History.error``
     set. Errors in the set-up (a run the model cannot replay at all) are raised.
-    ``rank_at_floor``: as :func:`diagnose`, for a model at its floor from the start."""
+    ``rank_at_floor``: as :func:`diagnose`, for a model at its floor from the start.
+    ``stop_on_interrupt``: a ``KeyboardInterrupt`` after the set-up (Ctrl-C; ``popup
+    diagnose`` also raises one on SIGTERM and at its ``--time-limit``) ends the loop like a
+    failed round, returning the rounds finished, instead of propagating."""
     t_start = time.perf_counter()
     for n in effects or []:
         fx.normalize(n, {})  # bad input is refused before any work
@@ -165,8 +169,10 @@ def improve(
             d = diagnose(current, run, effects=remaining, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, refit=fitted_params,
                          starts=_prior_fits(diags), screen=JOINT_TOP if len(added) >= 2 else 0)
             diags.append(d)
-    except KeyboardInterrupt:
-        raise
+    except KeyboardInterrupt as e:
+        if not stop_on_interrupt:
+            raise
+        error = f"round {rnd + 1} interrupted: {e or 'KeyboardInterrupt'}"
     except Exception as e:  # noqa: BLE001 - nothing lost: the rounds before are returned
         error = f"round {rnd + 1} failed: {type(e).__name__}: {e}"
     h = History(steps, diags, "", run=str(run.source), seconds=0.0, error=error, noise=prob.noise, notes=notes, noise_initial=noise0,
