@@ -3,7 +3,8 @@
 - No private name (``_x``) of one module is imported or used by another (the compiled
   ``_core`` excepted: it is the package's private binding).
 - Module-level imports between the package's modules form no cycle.
-- ``popup.diagnosis``'s modules import only those before them in its documented order.
+- The modules of ``popup.diagnosis`` and ``popup.setmembership`` import only those before
+  them in their package's documented order.
 """
 
 from __future__ import annotations
@@ -15,7 +16,10 @@ from typing import Dict, List, Set, Tuple
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "python" / "popup"
-DIAGNOSIS_ORDER = ["rules", "results", "evidence", "candidate", "conclusion", "rank", "loop", "cli"]
+ORDERS = {
+    "diagnosis": ["rules", "results", "evidence", "candidate", "conclusion", "rank", "loop", "cli"],
+    "setmembership": ["structure", "data", "regression", "result", "lp", "linear", "oe_model"],
+}
 
 
 def _modules() -> Dict[str, pathlib.Path]:
@@ -103,10 +107,11 @@ def test_module_level_imports_form_no_cycle():
     assert not cycles, cycles
 
 
-@pytest.mark.parametrize("mod", DIAGNOSIS_ORDER)
-def test_each_diagnosis_module_imports_only_those_before_it(mod):
-    deps, _ = _scan(f"popup.diagnosis.{mod}")
-    siblings = {d.rsplit(".", 1)[1] for d in deps if d.startswith("popup.diagnosis.")}
-    later = [s for s in siblings if DIAGNOSIS_ORDER.index(s) >= DIAGNOSIS_ORDER.index(mod)]
-    assert not later, f"popup.diagnosis.{mod} imports {later}, which come after it"
-    assert set(DIAGNOSIS_ORDER) | {"__init__"} == {p.stem for p in (ROOT / "diagnosis").glob("*.py")}
+@pytest.mark.parametrize("pkg, mod", [(p, m) for p, ms in ORDERS.items() for m in ms])
+def test_each_package_module_imports_only_those_before_it(pkg, mod):
+    order = ORDERS[pkg]
+    deps, _ = _scan(f"popup.{pkg}.{mod}")
+    siblings = {d.rsplit(".", 1)[1] for d in deps if d.startswith(f"popup.{pkg}.")}
+    later = [s for s in siblings if order.index(s) >= order.index(mod)]
+    assert not later, f"popup.{pkg}.{mod} imports {later}, which come after it"
+    assert set(order) | {"__init__"} == {p.stem for p in (ROOT / pkg).glob("*.py")}
