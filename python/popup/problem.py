@@ -55,6 +55,7 @@ floor has ``r_c ≈ 1`` whatever the model does and adds nothing.
 from __future__ import annotations
 
 import math
+import threading
 from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -81,6 +82,7 @@ __all__ = [
     "SPIKE_WINDOW",
     "ENCODER_DRAWS",
     "Shifted",
+    "Cancelled",
 ]
 
 ERROR_DEFINITION = (
@@ -321,6 +323,8 @@ class ReplayProblem:
     sigma: np.ndarray
     _count: List[int]
     _nominal: Optional[Tuple[np.ndarray, Any]]
+    _cancel: Optional[threading.Event]
+    _threads: List[int]
     _enc: List[Optional[np.ndarray]]
     q_base: np.ndarray
     q_corr: np.ndarray
@@ -343,8 +347,11 @@ class ReplayProblem:
             run.check()  # a data glitch is named here, never blamed on missing physics
         self.model = model
         self.run = run
-        self.threads = int(threads)
+        # shared with the problems derived from this one, so that :meth:`fork`'s owner can
+        # hand a candidate more threads once others have finished (bits do not depend on it)
+        self._threads = _parent._threads if _parent is not None and int(threads) == _parent.threads else [int(threads)]
         self._count = _parent._count if _parent is not None else [0]
+        self._cancel = _parent._cancel if _parent is not None else None
         self.where = str(run.data_file if run.data_file is not None else run.source)
         if run.replay not in ("encoder", "reference"):
             raise MeasuredRunError(f"{self.where}: unknown replay mode {run.replay!r}; expected \"encoder\" or \"reference\"")
@@ -499,7 +506,38 @@ class ReplayProblem:
         p.iq, p.iv = q, v
         return p
 
+    def fork(self, threads: int, cancel: Optional[threading.Event] = None) -> "ReplayProblem":
+        """The same problem for one of several candidates fitted at once, each on its own
+        thread: its own rollout counter (:attr:`nfev` from 0, so a candidate's count does not
+        depend on what runs beside it) and ``threads`` rollout threads (its own, shared with
+        the problems derived from it, which may be changed while it runs); the nominal
+        simulation and the encoder's replay error are computed here, once, and shared.
+        Once ``cancel`` is set, every simulation of this problem and of those derived from it
+        raises :class:`Cancelled` (the other candidates are stopped after an interrupt)."""
+        self.nominal_simulation()
+        _ = self.encoder_sigma
+        p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
+        p._nominal = self._nominal
+        p._threads = [int(threads)]
+        p._count = [0]
+        p._cancel = cancel
+        return p
+
+    def check_cancel(self) -> None:
+        """Raise :class:`Cancelled` if this problem's cancel token (:meth:`fork`) is set."""
+        if self._cancel is not None and self._cancel.is_set():
+            raise Cancelled("cancelled: another candidate's thread was interrupted")
+
     # ------------------------------------------------------------------ properties
+    @property
+    def threads(self) -> int:
+        """Rollout threads (0 = every core); shared with the problems derived from this one."""
+        return self._threads[0]
+
+    @threads.setter
+    def threads(self, v: int) -> None:
+        self._threads[0] = int(v)
+
     @property
     def nfev(self) -> int:
         """Simulations run so far by this problem and every problem derived from it."""
@@ -643,6 +681,7 @@ class ReplayProblem:
     def simulate(self, flats: np.ndarray, model: Optional["Model"] = None, *, full: bool = False) -> Any:
         """Simulated channels on the measured stamps, (B, n, C), NaN where a run failed
         or outside the simulated span; ``full``: also the raw batch result."""
+        self.check_cancel()
         m = self.model if model is None else model
         flats = np.atleast_2d(np.asarray(flats, dtype=np.float64))
         B = flats.shape[0]
@@ -692,6 +731,7 @@ class ReplayProblem:
     def nominal_simulation(self) -> np.ndarray:
         """(n, C) the model as given, simulated once (:meth:`nominal_result`) and kept."""
         if self._nominal is None:
+            self.check_cancel()
             m = self.model
             if self.closed:
                 res: Any = Shifted(m.run_task(self.task, duration=self.duration, q0=self.q0.tolist(), sample_rate=self.sample_rate), self.t0)
@@ -714,6 +754,7 @@ class ReplayProblem:
     def replay_angles(self, q_enc: np.ndarray) -> np.ndarray:
         """(n, C) the model replaying encoder angles ``q_enc`` [rad] (n_enc, 3) on :attr:`t_enc`,
         on the measured stamps (the encoder bootstrap, :mod:`popup.unseen`)."""
+        self.check_cancel()
         res = self.model.replay(self.t_enc, q_enc, sample_rate=self.sample_rate, initial_q=self.iq, initial_v=self.iv)
         self.nfev += 1
         return self._on_stamps(res)
@@ -788,6 +829,13 @@ class ReplayProblem:
             out[c] = {"count": int(hit.sum()), "times": [float(v) for v in t[ok[hit]][:5]],
                       "share": float(min(max(part / excess, 0.0), 1.0)) if excess > 0 else 0.0}
         return out
+
+
+class Cancelled(BaseException):
+    """A candidate's work stopped because another thread was interrupted
+    (:meth:`ReplayProblem.fork`). A ``BaseException``, like ``KeyboardInterrupt``: the
+    handlers that keep one failing candidate from stopping a ranking do not catch it. It
+    never reaches the user: the interrupt that caused it is raised instead."""
 
 
 def systematic(ms: np.ndarray) -> float:

@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import math
+import os
+import threading
 import time
-from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from .. import effects as fx
 from .. import estimate as est
 from ..compare import compare
 from ..exceptions import InputError
 from ..io import MeasuredRun
-from ..problem import ReplayProblem
+from ..problem import Cancelled, ReplayProblem
 from ..unseen import fit_unseen_motion
 from .rules import FLOOR_MULTIPLE, JOINT_TOP, Progress, model_at_floor
 from .results import Diagnosis, Suspect
@@ -21,6 +23,121 @@ from .conclusion import round_conclusion
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..model import Model
+
+
+def cores(prob: ReplayProblem) -> int:
+    """The cores a ranking on ``prob`` may use: its ``threads``, or (0) every core this
+    process may run on."""
+    if prob.threads > 0:
+        return prob.threads
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _each(prob: ReplayProblem, work: Sequence[Tuple[str, Callable[[ReplayProblem], Suspect]]], progress: Optional[Progress], done0: int,
+          total: int) -> List[Suspect]:
+    """Each ``(label, fn)`` of ``work`` as ``fn(fork)``, on a fork of ``prob``
+    (:meth:`ReplayProblem.fork`), up to :func:`cores` at once; the results in ``work``'s
+    order. Every candidate's fit depends on ``prob`` and its own name only, so the results
+    (rollout counts included) are the same bits whatever the number of threads; the
+    candidates running at a time share the cores as rollout threads (the last ones running
+    get them all).
+
+    An interrupt in this thread (Ctrl-C, or a handler's ``KeyboardInterrupt``) stops the
+    others at their next simulation and is raised once they have ended."""
+    n = cores(prob)
+    width = max(1, min(n, len(work)))
+    lock = threading.Lock()
+    started = [done0]
+
+    def run(label: str, fn: Callable[[ReplayProblem], Suspect], fork: ReplayProblem) -> Suspect:
+        if progress is not None:
+            with lock:
+                progress({"effect": label, "done": started[0], "total": total})
+                started[0] += 1
+        return fn(fork)
+
+    if width == 1:
+        out = []
+        for label, fn in work:
+            fork = prob.fork(prob.threads)
+            try:
+                out.append(run(label, fn, fork))
+            finally:
+                prob.nfev += fork.nfev
+        return out
+    cancel = threading.Event()
+    forks = [prob.fork(max(1, n // width), cancel) for _ in work]
+    results: List[Optional[Suspect]] = [None] * len(work)
+    errors: List[Optional[BaseException]] = [None] * len(work)
+    todo = iter(range(len(work)))
+    lock_next = threading.Lock()
+
+    running: Dict[int, ReplayProblem] = {}
+
+    def share(i: Optional[int], fork: Optional[ReplayProblem]) -> None:
+        # the cores split over the candidates running now: the last ones get them all
+        with lock_next:
+            if fork is not None:
+                running[i] = fork  # type: ignore[index]
+            else:
+                running.pop(i, None)  # type: ignore[arg-type]
+            k = len(running)
+            for j, f in enumerate(sorted(running)):
+                running[f].threads = max(1, n // k + (1 if j < n % k else 0)) if k else 1
+
+    def worker() -> None:
+        while not cancel.is_set():
+            with lock_next:
+                i = next(todo, None)
+            if i is None:
+                return
+            share(i, forks[i])
+            try:
+                results[i] = run(work[i][0], work[i][1], forks[i])
+            except BaseException as e:  # noqa: BLE001 - handed to the main thread
+                errors[i] = e
+                cancel.set()
+            finally:
+                share(i, None)
+
+    threads: List[threading.Thread] = []
+    try:
+        for k in range(width):
+            th = threading.Thread(target=worker, name=f"popup-candidate-{k}", daemon=True)
+            threads.append(th)  # before start(): an interrupt inside start() still joins it
+            th.start()
+        # timed joins: a signal the kernel hands to another thread is only run by this (the
+        # main) thread between bytecodes, never while it blocks on a lock
+        while any(th.is_alive() for th in threads):
+            for th in threads:
+                th.join(0.1)
+    except BaseException:
+        cancel.set()
+        for th in threads:
+            if th.ident is not None:
+                th.join()
+        raise
+    finally:
+        prob.nfev += sum(f.nfev for f in forks)
+    failed = [e for e in errors if e is not None and not isinstance(e, Cancelled)]
+    if failed:
+        raise failed[0]
+    return [r for r in results if r is not None]
+
+
+def _screen(name: str, ev: Dict[str, Any], max_iter: int, start: Mapping[str, Sequence[float]]) -> Callable[[ReplayProblem], Suspect]:
+    return lambda p: screen_fit(p, name, ev, max_iter, start)
+
+
+def _try(name: str, ev: Dict[str, Any], max_iter: int, also: Any, prior: Any) -> Callable[[ReplayProblem], Suspect]:
+    return lambda p: try_effect(p, name, ev, max_iter, also, prior)
+
+
+def _refit(s: Suspect, ev: Dict[str, Any], max_iter: int, also: Any, prior: Any) -> Callable[[ReplayProblem], Suspect]:
+    return lambda p: refit_jointly(p, s, ev, max_iter, also, prior)
 
 
 def model_error(model: "Model", run: MeasuredRun, *, channels: Optional[Sequence[str]] = None, sample_rate: Optional[float] = None,
@@ -110,11 +227,11 @@ def diagnose(
     n_joint = min(JOINT_TOP, len(todo), screen or JOINT_TOP) if also and not joint else 0
     if screen > 0 and starts:
         with_start = [n for n in todo if starts.get(n)]
-        for i, name in enumerate(with_start):
-            if progress is not None:
-                progress({"effect": f"{name} (screen)", "done": i, "total": len(with_start) + min(screen, len(todo)) + n_joint})
+        for name in with_start:
             evs[name] = evidence_for(name, cmp, prob)
-            quick[name] = screen_fit(prob, name, evs[name], max_iter, starts[name])
+        screened = _each(prob, [(f"{name} (screen)", _screen(name, evs[name], max_iter, starts[name])) for name in with_start],
+                         progress, 0, len(with_start) + min(screen, len(todo)) + n_joint)
+        quick = dict(zip(with_start, screened))
         order = sorted(quick.values(), key=rank_key)
         full = {q.effect for q in order[:screen]} | {q.effect for q in order if q.significant} | {n for n in todo if n not in quick}
         todo = [n for n in todo if n in full] + [n for n in todo if n not in full]
@@ -122,11 +239,11 @@ def diagnose(
     else:
         full, done0 = set(todo), 0
     total = done0 + len(full) + n_joint
-    for i, name in enumerate(n for n in todo if n in full):
-        if progress is not None:
-            progress({"effect": name, "done": done0 + i, "total": total})
+    fitted = [n for n in todo if n in full]
+    for name in fitted:
         evs.setdefault(name, evidence_for(name, cmp, prob))
-        suspects.append(try_effect(prob, name, evs[name], max_iter, also if joint and also else None, (starts or {}).get(name)))
+    suspects += _each(prob, [(name, _try(name, evs[name], max_iter, also if joint and also else None, (starts or {}).get(name))) for name in fitted],
+                      progress, done0, total)
     for name in todo:
         if name not in full:
             q = quick[name]
@@ -134,11 +251,11 @@ def diagnose(
             suspects.append(q)
     suspects.sort(key=rank_key)
     if also:
-        for i, s in enumerate(suspects[:n_joint]):
-            if progress is not None:
-                progress({"effect": f"{s.effect} (joint refit)", "done": done0 + len(full) + i, "total": total})
-            if s.tested and math.isfinite(s.score):
-                suspects[i] = refit_jointly(prob, s, evs[s.effect], max_iter, also, (starts or {}).get(s.effect))
+        top = [i for i, s in enumerate(suspects[:n_joint]) if s.tested and math.isfinite(s.score)]
+        refits = _each(prob, [(f"{suspects[i].effect} (joint refit)", _refit(suspects[i], evs[suspects[i].effect], max_iter, also, (starts or {}).get(suspects[i].effect)))
+                              for i in top], progress, done0 + len(full), total)
+        for i, r in zip(top, refits):
+            suspects[i] = r
         suspects.sort(key=rank_key)
     if floor and todo:
         why = (f"not significant: the model is at its floor (systematic error {prob.floor_error(per0):.3g} above the noise "
