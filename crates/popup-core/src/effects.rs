@@ -637,6 +637,23 @@ pub fn is_shaping(effect: &str, name: &str) -> bool {
     SHAPING.iter().any(|&(e, n)| e == effect && n == name)
 }
 
+/// Effect parameters (`effect.name`, `*` for all of an effect's) that, in encoder replay
+/// with every gear rigid (no `backlash` link side free in its gap), act on the sensor rows
+/// only, never on the motion (the motor rows are prescribed): the motor torque read
+/// (`tau*`: friction, its clamp) and the delays of the sensor groups read from the physics
+/// (the encoder's delay moves the drive, so it is not one). A batch whose jobs differ only
+/// in them needs one run of physics ([`crate::rollout`]).
+pub const OUTPUT_ONLY_IN_REPLAY: &[&str] = &["joint_friction.*", "actuator_saturation.*", "sensor_delay.imu", "sensor_delay.torque", "sensor_delay.mocap"];
+
+/// Whether `a` and `b` differ at most in the parameters of [`OUTPUT_ONLY_IN_REPLAY`].
+pub fn same_motion(a: &Effects, b: &Effects) -> bool {
+    let mut c = *b;
+    c.joint_friction = a.joint_friction;
+    c.actuator_saturation = a.actuator_saturation;
+    c.sensor_delay = SensorDelay { encoder: b.sensor_delay.encoder, ..a.sensor_delay };
+    c == *a
+}
+
 /// Motor-side friction torque at motor rate `v` [N·m] (joint `k` of 3).
 #[inline]
 pub fn friction_torque(f: &JointFriction, k: usize, v: f64) -> f64 {

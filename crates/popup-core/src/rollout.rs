@@ -6,8 +6,10 @@
 use crate::error::Result;
 use crate::model::Model;
 use crate::params::{ParamData, Params};
-use crate::sim::{run, run_until, RunConfig, Trajectory};
-use std::sync::atomic::AtomicBool;
+use crate::effects::same_motion;
+use crate::sim::{resample, run, run_recorded, run_until, Motion, RunConfig, Trajectory};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 /// One job of a batch.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,11 +37,131 @@ pub fn rollout(model: &Model, jobs: &[Job], threads: usize) -> Vec<Result<Trajec
 
 /// [`rollout`] that stops once `stop` is raised (e.g. by a Ctrl-C watcher): running jobs
 /// end with the samples they have, jobs not started yet end with no samples.
+///
+/// A job of an encoder replay with every gear rigid whose parameters differ from an earlier
+/// job's only in what acts on the sensor rows alone ([`crate::effects::same_motion`], e.g.
+/// a friction fit's Jacobian) is not run again: its rows are computed at that job's sample
+/// states ([`resample`]), the same bits.
 pub fn rollout_until(model: &Model, jobs: &[Job], threads: usize, stop: &AtomicBool) -> Vec<Result<Trajectory>> {
-    par_map(jobs, threads, |j| {
-        let pd = ParamData::new(model, &j.params)?;
-        run_until(model, &pd, &j.run, stop)
-    })
+    rollout_cached(model, jobs, threads, stop, None)
+}
+
+/// A run's motion kept for the jobs that share it.
+type Kept = Arc<Motion>;
+
+/// The motions of recent batches whose jobs shared one ([`rollout_cached`]): a later batch
+/// with that motion (a friction fit's next step) is computed from the states, not run.
+/// Holds at most [`MotionCache::CAPACITY`] motions, the least recently used dropped first.
+#[derive(Debug, Default)]
+pub struct MotionCache {
+    entries: Mutex<Vec<(Job, Kept)>>,
+    hits: AtomicUsize,
+}
+
+impl MotionCache {
+    /// Motions kept.
+    pub const CAPACITY: usize = 4;
+
+    /// Jobs computed from a kept motion so far (runs of physics saved).
+    pub fn hits(&self) -> usize {
+        self.hits.load(Ordering::Relaxed)
+    }
+
+    /// A motion that `job` shares, moved to the front.
+    fn find(&self, job: &Job) -> Option<Kept> {
+        let mut e = self.entries.lock().unwrap_or_else(|p| p.into_inner());
+        let i = e.iter().position(|(j, _)| shares(j, job))?;
+        let hit = e.remove(i);
+        let m = hit.1.clone();
+        self.hits.fetch_add(1, Ordering::Relaxed);
+        e.insert(0, hit);
+        Some(m)
+    }
+
+    fn insert(&self, job: &Job, m: Kept) {
+        let mut e = self.entries.lock().unwrap_or_else(|p| p.into_inner());
+        e.insert(0, (job.clone(), m));
+        e.truncate(Self::CAPACITY);
+    }
+}
+
+/// [`rollout_until`] that also takes motions from, and gives them to, `cache`: the motion
+/// of a batch whose jobs share one is kept, and a job sharing a kept motion is computed
+/// from its states. The results are the same bits with or without a cache.
+pub fn rollout_cached(model: &Model, jobs: &[Job], threads: usize, stop: &AtomicBool, cache: Option<&MotionCache>) -> Vec<Result<Trajectory>> {
+    let base = shared_motion(jobs);
+    let kept: Vec<Option<Kept>> = (0..jobs.len()).map(|j| if base[j].is_none() && eligible(&jobs[j]) { cache.and_then(|c| c.find(&jobs[j])) } else { None }).collect();
+    let roots: Vec<(usize, bool)> =
+        (0..jobs.len()).filter(|&j| base[j].is_none() && kept[j].is_none()).map(|r| (r, base.contains(&Some(r)))).collect();
+    let ran = par_map(&roots, threads, |&(r, keep)| {
+        let pd = ParamData::new(model, &jobs[r].params)?;
+        if keep {
+            run_recorded(model, &pd, &jobs[r].run, stop)
+        } else {
+            run_until(model, &pd, &jobs[r].run, stop).map(|t| (t, None))
+        }
+    });
+    let mut out: Vec<Option<Result<Trajectory>>> = (0..jobs.len()).map(|_| None).collect();
+    let mut motions = kept;
+    for (&(r, _), res) in roots.iter().zip(ran) {
+        out[r] = Some(match res {
+            Ok((t, Some(s))) => {
+                let m: Kept = Arc::new(s);
+                // a run cut short by `stop` is not a motion to share later
+                if let Some(c) = cache.filter(|_| !stop.load(Ordering::Relaxed)) {
+                    c.insert(&jobs[r], m.clone());
+                }
+                motions[r] = Some(m);
+                Ok(t)
+            }
+            Ok((t, None)) => Ok(t),
+            Err(e) => Err(e),
+        });
+    }
+    let rest: Vec<usize> = (0..jobs.len()).filter(|&j| out[j].is_none()).collect();
+    let again = par_map(&rest, threads, |&j| {
+        let pd = ParamData::new(model, &jobs[j].params)?;
+        match motions[base[j].unwrap_or(j)].as_ref() {
+            Some(m) => resample(model, &pd, &jobs[j].run, m),
+            // the shared run failed: this one runs on its own (and fails with its own error)
+            None => run_until(model, &pd, &jobs[j].run, stop),
+        }
+    });
+    for (&j, res) in rest.iter().zip(again) {
+        out[j] = Some(res);
+    }
+    out.into_iter().map(|r| r.expect("every job has a result")).collect()
+}
+
+/// An encoder replay with every gear rigid (no `backlash` link side free in its gap): the
+/// motion does not depend on [`crate::effects::OUTPUT_ONLY_IN_REPLAY`].
+fn eligible(job: &Job) -> bool {
+    job.run.drive.is_replay() && job.params.effects.backlash.free_gap() == [0.0; 3]
+}
+
+/// Whether `b` has the motion of `a`: both [`eligible`], the same run config and the same
+/// parameters but for [`crate::effects::OUTPUT_ONLY_IN_REPLAY`].
+fn shares(a: &Job, b: &Job) -> bool {
+    let (p, q) = (&a.params, &b.params);
+    eligible(a) && eligible(b) && p.payload_kg == q.payload_kg && p.pressure_pa == q.pressure_pa && same_motion(&p.effects, &q.effects) && a.run == b.run
+}
+
+/// For each job, the earlier job whose motion it shares (`None`: it runs its own): both
+/// encoder replays of the same run config with every gear rigid, their parameters equal
+/// but for [`crate::effects::OUTPUT_ONLY_IN_REPLAY`].
+pub fn shared_motion(jobs: &[Job]) -> Vec<Option<usize>> {
+    let mut base = vec![None; jobs.len()];
+    let mut roots: Vec<usize> = Vec::new();
+    for (j, job) in jobs.iter().enumerate() {
+        if !eligible(job) {
+            continue;
+        }
+        match roots.iter().find(|&&i| shares(&jobs[i], job)) {
+            Some(&i) => base[j] = Some(i),
+            None => roots.push(j),
+        }
+    }
+    base
 }
 
 /// `f` over `items` on `threads` threads (0 = all cores; 1 = sequential on this thread),

@@ -157,6 +157,32 @@ fn energy_with(model: &Model, pd: &ParamData, t: f64, q: &VecN, v: &VecN, m: &Ma
     kin + pot
 }
 
+/// The `tau{k+1}` channel from the motor torque `tau` (friction included) [N·m]: clamped to
+/// `actuator_saturation` where it has a limit.
+#[inline]
+pub fn torque_read(fx: &crate::effects::Effects, k: usize, tau: f64) -> f64 {
+    let lim = fx.actuator_saturation.tau_max[k];
+    if lim.is_finite() {
+        tau.clamp(-lim, lim)
+    } else {
+        tau
+    }
+}
+
+/// The `tau*` channels of a row computed without `joint_friction` and `actuator_saturation`
+/// (`bare`, whose `dq*` hold the physics' motor rates) with the friction and clamp of `fx`:
+/// the same bits as [`sample`] with them (it adds the friction to the same torque).
+pub fn with_torque_effects(fx: &crate::effects::Effects, bare: &[f64; NCH], row: &mut [f64; NCH]) {
+    *row = *bare;
+    for k in 0..3 {
+        let mut tau = bare[7 + k];
+        if fx.joint_friction.on() {
+            tau += crate::effects::friction_torque(&fx.joint_friction, k, bare[4 + k]);
+        }
+        row[7 + k] = torque_read(fx, k, tau);
+    }
+}
+
 /// Fill one output row at time `t` for state (q, q̇) (already prescribed in replay, with
 /// the motor accelerations `am`). One mass matrix, one bias and one kinematics pass serve
 /// every channel.
@@ -205,8 +231,7 @@ pub fn sample_free(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
         if fx.joint_friction.on() {
             tau += crate::effects::friction_torque(&fx.joint_friction, k, vk);
         }
-        let lim = fx.actuator_saturation.tau_max[k];
-        row[7 + k] = if lim.is_finite() { tau.clamp(-lim, lim) } else { tau };
+        row[7 + k] = torque_read(fx, k, tau);
     }
     let ee = fr.point(model.ee.0 + 1, &model.ee.1);
     row[10..13].copy_from_slice(ee.as_slice());

@@ -350,17 +350,8 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
     let mut row = [0.0; NCH];
     let mut nsample = 0usize;
     let mut write = |st: &State, ratio: [f64; 2], row: &mut [f64; NCH], sink: &mut dyn Sink| -> Result<Flow> {
-        let mut q = st.q;
-        let mut v = st.v;
         let f = sink.state(&StateView { t: st.t, q: &st.q, v: &st.v, pd, ratio })?;
-        let g = gears(st, &mut Workspace::new());
-        let am = crate::backlash::prescribe(model, &cfg.drive, &g, st.t, &mut q, &mut v);
-        sample_free(model, pd, &cfg.drive, st.t, &q, &v, am, &g.free, row);
-        if let Some(enc) = &encoder {
-            let (qe, ve, _) = enc.eval(st.t);
-            row[1..4].copy_from_slice(&qe);
-            row[4..7].copy_from_slice(&ve);
-        }
+        output_row(model, pd, &cfg.drive, encoder.as_ref(), play, st, row);
         nsample += 1;
         Ok(either(f, line.push(row, None, sink)?))
     };
@@ -394,6 +385,120 @@ pub fn run_into(model: &Model, pd: &ParamData, cfg: &RunConfig, sink: &mut dyn S
     }
     line.finish(sink)?;
     Ok(OpenEnd { nsample, alarms, final_state: st })
+}
+
+/// One output row of an open-loop run at state `st` (before the sensor delays): the gears'
+/// modes at the state (all rigid unless `play`), the prescribed motor rows, the sensor
+/// channels, and the encoder's own `q*`/`dq*` where the physics does not give them.
+#[allow(clippy::too_many_arguments)]
+fn output_row(model: &Model, pd: &ParamData, drive: &Drive, encoder: Option<&Spline3>, play: bool, st: &State, row: &mut [f64; NCH]) {
+    let mut q = st.q;
+    let mut v = st.v;
+    let g = if play { crate::backlash::modes(model, pd, drive, st.t, &st.q, &st.v, Workspace::new().matrix()) } else { crate::backlash::RIGID };
+    let am = crate::backlash::prescribe(model, drive, &g, st.t, &mut q, &mut v);
+    sample_free(model, pd, drive, st.t, &q, &v, am, &g.free, row);
+    if let Some(enc) = encoder {
+        encoder_channels(enc, st.t, row);
+    }
+}
+
+/// A sink that keeps the state of every sample (for [`resample`]) and passes everything
+/// on to `inner`.
+struct Record<'a> {
+    inner: &'a mut dyn Sink,
+    states: Vec<State>,
+}
+
+impl Sink for Record<'_> {
+    fn sample(&mut self, row: &[f64; NCH], ctrl: Option<&[f64; crate::control::closed_loop::NCTRL]>) -> Result<Flow> {
+        self.inner.sample(row, ctrl)
+    }
+    fn event(&mut self, e: &Event) -> Result<Flow> {
+        self.inner.event(e)
+    }
+    fn state(&mut self, s: &StateView<'_>) -> Result<Flow> {
+        self.states.push(State { t: s.t, q: *s.q, v: *s.v });
+        self.inner.state(s)
+    }
+    fn poll(&mut self) -> Flow {
+        self.inner.poll()
+    }
+}
+
+/// A run's motion as its sensor rows before the effects that act on the rows alone
+/// ([`crate::effects::OUTPUT_ONLY_IN_REPLAY`]: friction, its clamp, the delays), from which
+/// [`resample`] gives the run of any of their values with no step of physics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Motion {
+    /// Rows at the sample states without friction, clamp, delays or the encoder's own
+    /// `q*`/`dq*` (so `dq*` are the physics' motor rates).
+    bare: Vec<[f64; NCH]>,
+    alarms: Vec<Alarm>,
+    final_state: State,
+}
+
+/// [`run_until`] that also returns the run's [`Motion`] (an open-loop run in encoder
+/// replay with every gear rigid; `None` otherwise).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_recorded(model: &Model, pd: &ParamData, cfg: &RunConfig, stop: &std::sync::atomic::AtomicBool) -> Result<(Trajectory, Option<Motion>)> {
+    let mut col = Collect::default();
+    let mut rec = Record { inner: &mut Stoppable { inner: &mut col, flag: stop }, states: Vec::new() };
+    let end = run_into(model, pd, cfg, &mut rec)?;
+    let states = rec.states;
+    let tr = Trajectory { data: col.data, nsample: end.nsample, alarms: end.alarms, final_state: end.final_state, warnings: pd.warnings.clone() };
+    let (drive, _) = effect_drive(model, pd, &cfg.drive)?;
+    if !drive.is_replay() || crate::backlash::active(pd, &drive) {
+        return Ok((tr, None));
+    }
+    let mut bare_pd = pd.clone();
+    bare_pd.params.effects.joint_friction = Default::default();
+    bare_pd.params.effects.actuator_saturation = Default::default();
+    let bare = states
+        .iter()
+        .map(|st| {
+            let mut row = [0.0; NCH];
+            output_row(model, &bare_pd, &drive, None, false, st, &mut row);
+            row
+        })
+        .collect();
+    let m = Motion { bare, alarms: tr.alarms.clone(), final_state: tr.final_state };
+    Ok((tr, Some(m)))
+}
+
+/// The run of `cfg` with parameters `pd` from a [`Motion`] that [`run_recorded`] made with
+/// the same `cfg` and parameters that differ from `pd` only in
+/// [`crate::effects::OUTPUT_ONLY_IN_REPLAY`] ([`crate::effects::same_motion`]): friction and
+/// clamp put on each row, the encoder's own channels, the delays. The same bits as [`run`]
+/// with `pd` (`tests/shared_motion.rs`).
+///
+/// # Errors
+/// As [`run`] for a bad `cfg` (the sample period, the drive).
+pub fn resample(model: &Model, pd: &ParamData, cfg: &RunConfig, m: &Motion) -> Result<Trajectory> {
+    let dt = model.options.dt;
+    let every = check_sample_period(cfg.sample_period, dt)?;
+    let (drive, encoder) = effect_drive(model, pd, &cfg.drive)?;
+    let fx = &pd.params.effects;
+    let mut line = DelayLine::for_sensors(every as f64 * dt, &fx.sensor_delay, !drive.is_replay());
+    let mut col = Collect::with_capacity(m.bare.len());
+    let mut row = [0.0; NCH];
+    for bare in &m.bare {
+        crate::sensor::with_torque_effects(fx, bare, &mut row);
+        if let Some(enc) = &encoder {
+            encoder_channels(enc, bare[0], &mut row);
+        }
+        line.push(&row, None, &mut col)?;
+    }
+    line.finish(&mut col)?;
+    Ok(Trajectory { data: col.data, nsample: m.bare.len(), alarms: m.alarms.clone(), final_state: m.final_state, warnings: pd.warnings.clone() })
+}
+
+/// The `q*`, `dq*` channels read from the encoder at `t` (not from the physics).
+fn encoder_channels(enc: &Spline3, t: f64, row: &mut [f64; NCH]) {
+    let (qe, ve, _) = enc.eval(t);
+    row[1..4].copy_from_slice(&qe);
+    row[4..7].copy_from_slice(&ve);
 }
 
 /// The drive the physics sees in replay under an encoder `sensor_delay` and a `backlash`

@@ -14,7 +14,7 @@ use popup_core::math::VecN;
 use popup_core::model::{Disable, Integrator, Model, Options};
 use popup_core::params::{ParamData, Params};
 use popup_core::limits::{check_collected, check_steps};
-use popup_core::rollout::{rollout_until, Job};
+use popup_core::rollout::{rollout_cached, Job, MotionCache};
 use popup_core::sensor::{CHANNELS, NCH, UNITS};
 use popup_core::sim::{check_sample_period, check_step, rest_state, RunConfig, State};
 use popup_core::statics;
@@ -27,6 +27,8 @@ use std::sync::Arc;
 #[pyclass(name = "Model", module = "popup._core", frozen)]
 pub struct PyModel {
     pub m: Arc<Model>,
+    /// Motions of recent rollouts that jobs shared (`popup_core::rollout::MotionCache`).
+    pub motion: Arc<MotionCache>,
 }
 
 /// A joint vector of the model (`nv` values; the capacity beyond stays 0).
@@ -74,7 +76,7 @@ impl PyModel {
             }
         }
         let options = Options { dt, integrator: Integrator::parse(integrator).py()?, gravity, disable: d, ..Options::default() };
-        Ok(PyModel { m: Arc::new(Model::compile(&arm.spec, options).py()?) })
+        Ok(PyModel { m: Arc::new(Model::compile(&arm.spec, options).py()?), motion: Arc::default() })
     }
 
     /// The arm this model was compiled from.
@@ -86,6 +88,13 @@ impl PyModel {
     #[getter]
     fn dt(&self) -> f64 {
         self.m.options.dt
+    }
+
+    /// Rollout jobs computed from the kept motion of an earlier batch (no physics run) so
+    /// far: jobs that differ from it only in friction, saturation or a sensor group's delay.
+    #[getter]
+    fn motion_hits(&self) -> usize {
+        self.motion.hits()
     }
     /// Integrator name.
     #[getter]
@@ -319,8 +328,9 @@ impl PyModel {
         let every = check_sample_period(sample_period, dt).py()?;
         check_collected(nb, (nstep / every + 1) as f64, NCH).py()?;
         let model = self.m.clone();
+        let motion = self.motion.clone();
         let results = match log {
-            None => interruptible(py, move |stop| rollout_until(&model, &jobs, threads, stop))?,
+            None => interruptible(py, move |stop| rollout_cached(&model, &jobs, threads, stop, Some(&motion)))?,
             Some(path) if nb == 1 => vec![interruptible(py, move |stop| logged(&model, &jobs[0], &path, log_experiment.unwrap_or_default(), stop))?],
             Some(_) => return Err(bad(format!("input log: one MCAP file logs one run; got a batch of {nb}"))),
         };

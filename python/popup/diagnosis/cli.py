@@ -93,7 +93,7 @@ def cli_main(argv: Sequence[str]) -> int:
     ap.add_argument("--max-rounds", type=int, default=4, help="most effects to add (default 4)")
     ap.add_argument("--effects", help="comma-separated effects to try (default: the whole library)")
     ap.add_argument("--channels", help="comma-separated channels to compare (default: every comparable one)")
-    ap.add_argument("--threads", type=int, default=0, help="rollout threads (0 = all cores)")
+    ap.add_argument("--threads", type=int, default=0, help="cores to use: candidates fitted at once, each with a share of them as rollout threads; the result does not depend on it (0 = all cores)")
     ap.add_argument("--rank-at-floor", action="store_true",
                     help="fit and rank every effect even when the model is at its floor (noise and encoder); by default they are not tried")
     ap.add_argument("--no-progress", action="store_true", help="no progress line on stderr (it is off anyway with --json or when stderr is not a terminal)")

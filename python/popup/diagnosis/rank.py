@@ -170,7 +170,9 @@ def diagnose(
     systematic error on ``run`` it explains, each fitted, validated on held-out samples,
     with intervals, identifiability and its residual evidence (module docs).
 
-    Effects that ``model`` already has are skipped. ``threads=0`` uses every core.
+    Effects that ``model`` already has are skipped. ``threads``: the cores to use (0 =
+    every core): the candidates are fitted that many at once, each on its own thread with a
+    share of the cores as rollout threads; the result is the same bits for any count.
     ``problem``: the run already set up in ``model`` (:class:`ReplayProblem`).
     ``progress``: called with ``{"effect", "done", "total"}`` before each effect.
     ``refit``: effects of ``model`` (``{effect: [parameter names]}``, as :func:`improve`
