@@ -111,3 +111,38 @@ def test_energy_conserved_with_damping_off():
     assert errs[-1] < 1e-5  # J
     for a, b in zip(errs, errs[1:]):
         assert a / b > 12
+
+
+def test_jobs_that_differ_in_friction_and_delays_only_share_one_motion_with_the_same_bits(encoder_run):
+    """Friction, saturation and the sensor groups' delays do not move the arm in replay: a
+    batch of them runs the physics once, and later batches of that motion none (a fit's
+    next steps); every array the same bits as a fresh model running each job alone."""
+    from popup import effects as fx
+
+    t, q = encoder_run
+    rng = np.random.default_rng(4)
+    model = popup.Model("popup-lab", payload_kg=1.0)
+
+    def flat(k):
+        f = model.effects_flat.copy()
+        f[fx.EFFECTS["joint_friction"].params["tau_c"].slice] = rng.uniform(0.0, 3.0, 3)
+        f[fx.EFFECTS["joint_friction"].params["b"].slice] = rng.uniform(0.0, 0.5, 3)
+        if k % 2:
+            f[fx.EFFECTS["joint_friction"].params["tau_s"].slice] = rng.uniform(0.0, 1.0, 3)
+            f[fx.EFFECTS["sensor_delay"].params["imu"].slice] = rng.uniform(0.0, 0.02)
+        if k % 3 == 2:
+            f[fx.EFFECTS["actuator_saturation"].params["tau_max"].slice] = [8.0, 15.0, np.inf]
+        return f
+
+    flats = np.stack([flat(k) for k in range(6)])
+    batch = model.rollout(encoder_t=t, encoder_q=q, effects=flats[:4], threads=2)
+    later = [model.rollout(encoder_t=t, encoder_q=q, effects=flats[k : k + 1], threads=1) for k in (4, 5)]
+    assert model.core.motion_hits == 2
+    for k in range(6):
+        alone = popup.Model("popup-lab", payload_kg=1.0).rollout(encoder_t=t, encoder_q=q, effects=flats[k : k + 1])
+        got = batch.data[k] if k < 4 else later[k - 4].data[0]
+        np.testing.assert_array_equal(got, alone.data[0])
+    assert not np.array_equal(batch.data[0], batch.data[1])
+    # another payload moves the arm: its own run, no motion shared
+    model.rollout(encoder_t=t, encoder_q=q, effects=flats[:1], payload_kg=1.5)
+    assert model.core.motion_hits == 2
