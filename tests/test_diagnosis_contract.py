@@ -534,3 +534,30 @@ def test_noise_floors_a_large_misfit_biased_are_re_estimated_as_the_model_improv
     assert js["nominal_error"] == pytest.approx(h.steps[0].error)
     assert js["channels"][c]["encoder_floor"] == pytest.approx(h.problem.encoder_floor[c])
     assert js["rounds"][0]["noise"][c] == pytest.approx(h.noise_initial[c])  # a round keeps the floors it was computed in
+
+
+def test_friction_is_judged_on_the_torques_beside_an_imu_error_no_effect_explains(nominal, tmp_path):
+    """Friction acts on the motor torques only in replay: beside a large systematic IMU error
+    that nothing in the library explains (here a 7 Hz wobble added to the IMUs' z axes, as
+    a gear rattling in a wide gap differently from the model does), the share rule is
+    applied to the torques. Friction is found although it explains a few % of the whole
+    error; the payload, which acts on every channel, is not made significant by it."""
+    t, q = popup.synth.lab_trajectory(6.0, seed=13)
+    truth = nominal.with_effect("joint_friction", tau_c=[1.0, 1.4, 0.5], b=[0.2, 0.2, 0.1])
+    run = popup.synth.measured_run(truth, t, q, tmp_path, seed=13)
+    df = run.data.copy()
+    tt = df["t"].to_numpy()
+    for c in ("imu1_az", "imu2_az"):
+        df[c] = df[c] + 1.5 * np.sin(2 * np.pi * 7.0 * tt)
+    write_run(tmp_path, dict(run.experiment), df, overwrite=True)
+    run = popup.read_run(tmp_path)
+    d = dg.diagnose(nominal, run, effects=["joint_friction", "payload_mass"])
+    fr = next(s for s in d.suspects if s.effect == "joint_friction")
+    pm = next(s for s in d.suspects if s.effect == "payload_mass")
+    assert fr.explained < dgr.MIN_EXPLAINED, fr.explained  # the whole error: mostly the IMU wobble
+    assert fr.significant and "the only channels it acts on" in fr.message, (fr.score, fr.explained, fr.message)
+    assert not pm.significant
+    np.testing.assert_allclose(fr.params["tau_c"], [1.0, 1.4, 0.5], rtol=0.15)
+    # the rule reads the core's registry: friction acts on the torques, a payload on everything
+    assert popup.effects.acts_only_on("joint_friction", ["tau_c", "b"], d.problem.channels) == ["tau1", "tau2", "tau3"]
+    assert popup.effects.acts_only_on("payload_mass", ["delta_kg"], d.problem.channels) is None

@@ -14,7 +14,7 @@ rollouts take.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Mapping, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -31,6 +31,8 @@ __all__ = [
     "to_flat",
     "from_flat",
     "normalize",
+    "OUTPUT_ONLY_IN_REPLAY",
+    "acts_only_on",
 ]
 
 #: What each effect looks like in the residual (``effects.md``), shown with suspects.
@@ -190,3 +192,24 @@ def is_neutral(effect: str, v: Any) -> bool:
 def active(v: Any) -> List[str]:
     """Names of the effects that are switched on in flat vector ``v``."""
     return [n for n in EFFECT_NAMES if not is_neutral(n, v)]
+
+
+#: ``(effect, parameter or "*", channel prefix)``: parameters that act on the sensor rows
+#: only in encoder replay, never on the motion (the friction and clamp of the motor torque
+#: read, the delays of the groups read from the physics), from the core.
+OUTPUT_ONLY_IN_REPLAY: Tuple[Tuple[str, str, str], ...] = tuple(_core.effect_output_only())
+
+
+def acts_only_on(effect: str, names: Sequence[str], channels: Sequence[str]) -> Optional[List[str]]:
+    """The ``channels`` that ``effect``'s parameters ``names`` act on in encoder replay when
+    each of them acts on the sensor rows only (:data:`OUTPUT_ONLY_IN_REPLAY`), else ``None``
+    (one of them moves the arm, so it may act on every channel)."""
+    prefixes = set()
+    for n in names:
+        hit = [pre for e, k, pre in OUTPUT_ONLY_IN_REPLAY if e == effect and k in ("*", n)]
+        if not hit:
+            return None
+        prefixes.update(hit)
+    if not prefixes:
+        return None
+    return [c for c in channels if any(c.startswith(pre) for pre in prefixes)]

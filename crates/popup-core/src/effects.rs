@@ -637,13 +637,21 @@ pub fn is_shaping(effect: &str, name: &str) -> bool {
     SHAPING.iter().any(|&(e, n)| e == effect && n == name)
 }
 
-/// Effect parameters (`effect.name`, `*` for all of an effect's) that, in encoder replay
-/// with every gear rigid (no `backlash` link side free in its gap), act on the sensor rows
-/// only, never on the motion (the motor rows are prescribed): the motor torque read
-/// (`tau*`: friction, its clamp) and the delays of the sensor groups read from the physics
-/// (the encoder's delay moves the drive, so it is not one). A batch whose jobs differ only
-/// in them needs one run of physics ([`crate::rollout`]).
-pub const OUTPUT_ONLY_IN_REPLAY: &[&str] = &["joint_friction.*", "actuator_saturation.*", "sensor_delay.imu", "sensor_delay.torque", "sensor_delay.mocap"];
+/// Effect parameters that, in encoder replay (the motor side prescribed), act on the sensor
+/// rows only, never on the motion, as `(effect, parameter or "*" for all of the effect's,
+/// the prefix of the channels they act on)`: the motor torque read (`tau*`: friction at the
+/// motor's rate, its clamp; with or without a gear's play, whose link side is behind the
+/// motor side) and the delays of the sensor groups read from the physics (the encoder's
+/// delay moves the drive, so it is not one). A rollout batch whose jobs differ only in them
+/// needs one run of physics ([`crate::rollout`], with every gear rigid), and the diagnosis
+/// measures such an effect's share of the error on those channels.
+pub const OUTPUT_ONLY_IN_REPLAY: &[(&str, &str, &str)] = &[
+    ("joint_friction", "*", "tau"),
+    ("actuator_saturation", "*", "tau"),
+    ("sensor_delay", "imu", "imu"),
+    ("sensor_delay", "torque", "tau"),
+    ("sensor_delay", "mocap", "ee_"),
+];
 
 /// Whether `a` and `b` differ at most in the parameters of [`OUTPUT_ONLY_IN_REPLAY`].
 pub fn same_motion(a: &Effects, b: &Effects) -> bool {

@@ -207,3 +207,29 @@ fn a_kept_motion_serves_later_batches_with_the_same_bits() {
     assert_eq!(bits(again[0].as_ref().unwrap()), alone[0]);
     assert_eq!(cache.hits(), 6, "pushed out: run again");
 }
+
+#[test]
+fn same_motion_ignores_exactly_the_parameters_of_the_output_only_table() {
+    use popup_core::effects::{same_motion, Effects, OUTPUT_ONLY_IN_REPLAY, PARAMS};
+    let base = Effects::default();
+    let flat = base.to_flat();
+    let mut off = 0;
+    for p in PARAMS.iter() {
+        let listed = OUTPUT_ONLY_IN_REPLAY.iter().any(|&(e, n, _)| e == p.effect && (n == "*" || n == p.name));
+        for i in 0..p.len {
+            let mut f = flat;
+            // a value inside the bounds, away from the neutral one
+            let (lo, hi) = (p.lo, if p.hi.is_finite() { p.hi } else { p.lo.max(1.0) * 10.0 });
+            f[off + i] = if f[off + i] == hi { 0.5 * (lo + hi) } else { (0.5 * (f[off + i] + hi)).min(f[off + i] + 1.0) };
+            if !flat[off + i].is_finite() {
+                f[off + i] = hi;
+            }
+            if p.integer {
+                f[off + i] = if flat[off + i] == hi { lo } else { hi };
+            }
+            let e = Effects::from_flat(&f).unwrap();
+            assert_eq!(same_motion(&base, &e), listed, "{}.{}[{i}]", p.effect, p.name);
+        }
+        off += p.len;
+    }
+}

@@ -29,6 +29,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_raise, m)?)?;
     m.add_function(wrap_pyfunction!(model::effect_registry, m)?)?;
     m.add_function(wrap_pyfunction!(model::effect_shaping, m)?)?;
+    m.add_function(wrap_pyfunction!(model::effect_output_only, m)?)?;
     m.add("EFFECT_NAMES", popup_core::effects::EFFECT_NAMES.to_vec())?;
     let presets = pyo3::types::PyDict::new(m.py());
     for (name, mat) in popup_core::beam::PRESETS {

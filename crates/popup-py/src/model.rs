@@ -381,6 +381,14 @@ pub fn effect_shaping() -> Vec<(&'static str, &'static str)> {
     popup_core::effects::SHAPING.to_vec()
 }
 
+/// The effect parameters that act on the sensor rows only in encoder replay, with the
+/// prefix of the channels they act on: (effect, name or "*", channel prefix)
+/// (`popup_core::effects::OUTPUT_ONLY_IN_REPLAY`).
+#[pyfunction]
+pub fn effect_output_only() -> Vec<(&'static str, &'static str, &'static str)> {
+    popup_core::effects::OUTPUT_ONLY_IN_REPLAY.to_vec()
+}
+
 /// One open-loop run streamed into an MCAP log and collected.
 fn logged(model: &Model, job: &Job, path: &str, experiment: String, stop: &std::sync::atomic::AtomicBool) -> popup_core::Result<popup_core::sim::Trajectory> {
     use popup_core::log::{LogOptions, McapLogger, RunMeta};

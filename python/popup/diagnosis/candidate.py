@@ -107,6 +107,30 @@ def silent_on(mask: np.ndarray, z0: np.ndarray, z1: np.ndarray) -> bool:
     return bool(ok.any() and np.max(np.abs(a[ok] - b[ok])) <= 1e-9)
 
 
+def share_where_it_acts(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], z0: np.ndarray, z1: np.ndarray,
+                        explained: float) -> Tuple[float, Optional[List[str]]]:
+    """The share of the systematic error a candidate explains, for the share rule
+    (:data:`MIN_EXPLAINED`), and the channels it was measured on: for a candidate whose
+    fitted parameters all act on some sensor rows only in encoder replay
+    (:func:`popup.effects.acts_only_on`: friction and its clamp on the motor torques), the
+    share ``1 − S²_after/S²_before`` of those channels (it cannot explain an error of the
+    others, whatever causes it); else ``explained``, the share of the whole error, and
+    ``None``."""
+    if prob.closed or any(p.effect != name for p, _ in free):
+        return explained, None
+    acts = fx.acts_only_on(name, sorted({p.name for p, _ in free}), prob.channels)
+    if not acts or len(acts) == len(prob.channels):
+        return explained, None
+    idx = [prob.channels.index(c) for c in acts]
+    ms0, _, _ = prob.channel_stats(z0)
+    ms1, _, _ = prob.channel_stats(z1)
+    s0 = max(float(np.mean(ms0[idx])) - 1.0, 0.0)
+    s1 = max(float(np.mean(ms1[idx])) - 1.0, 0.0)
+    if not (s0 > 0 and math.isfinite(s1)):
+        return 0.0, acts
+    return 1.0 - s1 / s0, acts
+
+
 def rank_key(s: Suspect) -> Tuple[int, int, float]:
     return (0 if s.significant else 1, 0 if s.tested else 1, -s.score if math.isfinite(s.score) else math.inf)
 
@@ -126,12 +150,19 @@ class _Fitted:
         self.v0, _ = prob.error(z_base, prob.validation)
         self.v1, _ = prob.error(out.z, prob.validation)
         self.explained = 1.0 - (self.e1 / self.e0) ** 2 if self.e0 > 0 and math.isfinite(self.e1) else 0.0
+        self.share, self.acts = share_where_it_acts(prob, name, free, z_base, out.z, self.explained)
         self.unresolved = unresolved_play(prob, name, out.flat)
         self.silent = silent_on(prob.validation & prob.used, z_base, out.z)
         self.significant = bool(
-            self.score > SCORE_THRESHOLD and self.explained >= MIN_EXPLAINED
+            self.score > SCORE_THRESHOLD and self.share >= MIN_EXPLAINED
             and ((self.lr_val > 0 and self.v1 < self.v0) or self.silent) and not self.unresolved
         )
+
+    def _share_note(self) -> str:
+        if self.acts is None or self.explained >= MIN_EXPLAINED or self.share < MIN_EXPLAINED:
+            return ""
+        return (f"it explains {100 * self.share:.0f} % of the systematic error on {', '.join(self.acts)}, the only channels it acts on "
+                f"in replay ({100 * self.explained:.0f} % of the whole): the share rule is applied there")
 
     def suspect(self, ev: Dict[str, Any], nfev: int, message: str = "") -> Suspect:
         names = [f"{p.name}[{i}]" if p.effect == self.name else f"{p.effect}.{p.name}[{i}]" for p, i in self.free]
@@ -143,7 +174,7 @@ class _Fitted:
         return Suspect(
             self.name, self.significant, float(self.score), est.params_dict(self.name, self.out.flat), ci, self.e0, self.e1, self.per1, ev,
             n_eff=self.neff, n_rollouts=nfev, tested=True, explained=self.explained,
-            message="; ".join(m for m in (self.unresolved, "not checked on the held-out samples: it does not act there" if self.silent else "", message) if m),
+            message="; ".join(m for m in (self.unresolved, "not checked on the held-out samples: it does not act there" if self.silent else "", self._share_note(), message) if m),
             validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant,
             identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free if p.effect == self.name}),
             refitted={e: est.params_dict(e, self.out.flat) for e in sorted({p.effect for p, _ in self.free if p.effect != self.name})},
