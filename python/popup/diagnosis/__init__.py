@@ -38,7 +38,9 @@ at the same accuracy. An effect that still cannot be tried is listed with
 ``LR = Σ_c n_eff,c ln(mean z²_c,before / mean z²_c,after)`` on the training samples and
 ``n_eff,c = n_c (1 − ρ_c)/(1 + ρ_c)`` (ρ_c the lag-1 autocorrelation of the fitted
 residual). An effect is *significant* when the score exceeds :data:`SCORE_THRESHOLD`, it
-explains at least :data:`MIN_EXPLAINED` of the systematic error (``1 − S²_after/S²_before``)
+explains at least :data:`MIN_EXPLAINED` of the systematic error (``1 − S²_after/S²_before``;
+for an effect that acts on some sensor rows only in replay, friction and its clamp on the
+motor torques, of the error on those channels: :func:`popup.effects.acts_only_on`)
 and it is confirmed on the held-out samples (the likelihood ratio there is positive and the
 held-out error falls), unless it does not act on them at all (a torque limit reached only in
 training blocks: the held-out samples can neither confirm nor refute it; its message says so).
