@@ -38,7 +38,7 @@ pub fn rollout(model: &Model, jobs: &[Job], threads: usize) -> Vec<Result<Trajec
 /// [`rollout`] that stops once `stop` is raised (e.g. by a Ctrl-C watcher): running jobs
 /// end with the samples they have, jobs not started yet end with no samples.
 ///
-/// A job of an encoder replay with every gear rigid whose parameters differ from an earlier
+/// A job of an encoder replay whose parameters differ from an earlier
 /// job's only in what acts on the sensor rows alone ([`crate::effects::same_motion`], e.g.
 /// a friction fit's Jacobian) is not run again: its rows are computed at that job's sample
 /// states ([`resample`]), the same bits.
@@ -133,10 +133,11 @@ pub fn rollout_cached(model: &Model, jobs: &[Job], threads: usize, stop: &Atomic
     out.into_iter().map(|r| r.expect("every job has a result")).collect()
 }
 
-/// An encoder replay with every gear rigid (no `backlash` link side free in its gap): the
-/// motion does not depend on [`crate::effects::OUTPUT_ONLY_IN_REPLAY`].
+/// An encoder replay: the motor side is prescribed, so the motion does not depend on
+/// [`crate::effects::OUTPUT_ONLY_IN_REPLAY`] (a gear's link side, free in its gap, is
+/// behind the motor side and its friction).
 fn eligible(job: &Job) -> bool {
-    job.run.drive.is_replay() && job.params.effects.backlash.free_gap() == [0.0; 3]
+    job.run.drive.is_replay()
 }
 
 /// Whether `b` has the motion of `a`: both [`eligible`], the same run config and the same
@@ -147,7 +148,7 @@ fn shares(a: &Job, b: &Job) -> bool {
 }
 
 /// For each job, the earlier job whose motion it shares (`None`: it runs its own): both
-/// encoder replays of the same run config with every gear rigid, their parameters equal
+/// encoder replays of the same run config, their parameters equal
 /// but for [`crate::effects::OUTPUT_ONLY_IN_REPLAY`].
 pub fn shared_motion(jobs: &[Job]) -> Vec<Option<usize>> {
     let mut base = vec![None; jobs.len()];

@@ -438,7 +438,7 @@ pub struct Motion {
 }
 
 /// [`run_until`] that also returns the run's [`Motion`] (an open-loop run in encoder
-/// replay with every gear rigid; `None` otherwise).
+/// replay; `None` otherwise).
 ///
 /// # Errors
 /// As [`run`].
@@ -449,17 +449,20 @@ pub fn run_recorded(model: &Model, pd: &ParamData, cfg: &RunConfig, stop: &std::
     let states = rec.states;
     let tr = Trajectory { data: col.data, nsample: end.nsample, alarms: end.alarms, final_state: end.final_state, warnings: pd.warnings.clone() };
     let (drive, _) = effect_drive(model, pd, &cfg.drive)?;
-    if !drive.is_replay() || crate::backlash::active(pd, &drive) {
+    if !drive.is_replay() {
         return Ok((tr, None));
     }
     let mut bare_pd = pd.clone();
     bare_pd.params.effects.joint_friction = Default::default();
     bare_pd.params.effects.actuator_saturation = Default::default();
+    // a gear's play: its modes at each state, as the run had them (they do not depend on
+    // the motor side's friction or clamp)
+    let play = crate::backlash::active(&bare_pd, &drive);
     let bare = states
         .iter()
         .map(|st| {
             let mut row = [0.0; NCH];
-            output_row(model, &bare_pd, &drive, None, false, st, &mut row);
+            output_row(model, &bare_pd, &drive, None, play, st, &mut row);
             row
         })
         .collect();
