@@ -643,7 +643,7 @@ pub fn is_shaping(effect: &str, name: &str) -> bool {
 /// motor's rate, its clamp; with or without a gear's play, whose link side is behind the
 /// motor side) and the delays of the sensor groups read from the physics (the encoder's
 /// delay moves the drive, so it is not one). A rollout batch whose jobs differ only in them
-/// needs one run of physics ([`crate::rollout`], with every gear rigid), and the diagnosis
+/// needs one run of physics ([`crate::rollout`]), and the diagnosis
 /// measures such an effect's share of the error on those channels.
 pub const OUTPUT_ONLY_IN_REPLAY: &[(&str, &str, &str)] = &[
     ("joint_friction", "*", "tau"),
