@@ -4,24 +4,13 @@
 
 mod common;
 
-use common::Rng;
+use common::{traj_bits, Rng};
 use popup_core::drive::{Drive, Linear3, Spline3};
 use popup_core::model::{Integrator, Model, Options};
 use popup_core::params::Params;
 use popup_core::rollout::{rollout, run_job, Job};
-use popup_core::sim::{RunConfig, Trajectory};
+use popup_core::sim::RunConfig;
 use popup_core::spec::ArmSpec;
-
-fn bits(tr: &Trajectory) -> Vec<u64> {
-    let mut b: Vec<u64> = tr.data.iter().map(|x| x.to_bits()).collect();
-    b.push(tr.nsample as u64);
-    b.push(tr.final_state.t.to_bits());
-    b.extend(tr.final_state.q.iter().chain(tr.final_state.v.iter()).map(|x| x.to_bits()));
-    for a in &tr.alarms {
-        b.extend([a.link as u64, a.t_start.to_bits(), a.t_end.to_bits(), a.peak_ratio.to_bits()]);
-    }
-    b
-}
 
 fn jobs() -> Vec<Job> {
     let mut rng = Rng(2024);
@@ -53,7 +42,7 @@ fn same_run_twice_is_bit_identical() {
             let a = run_job(&model, job).unwrap();
             let b = run_job(&model, job).unwrap();
             assert!(a.nsample > 50);
-            assert_eq!(bits(&a), bits(&b), "{integ:?}: two identical runs differ");
+            assert_eq!(traj_bits(&a), traj_bits(&b), "{integ:?}: two identical runs differ");
         }
     }
 }
@@ -62,7 +51,7 @@ fn same_run_twice_is_bit_identical() {
 fn rollout_is_bit_identical_for_any_thread_count() {
     let model = Model::compile(&ArmSpec::popup_lab(), Options::default()).unwrap();
     let jobs = jobs();
-    let one_by_one: Vec<Vec<u64>> = jobs.iter().map(|j| bits(&run_job(&model, j).unwrap())).collect();
+    let one_by_one: Vec<Vec<u64>> = jobs.iter().map(|j| traj_bits(&run_job(&model, j).unwrap())).collect();
     // the jobs really differ from each other
     for i in 1..one_by_one.len() {
         assert_ne!(one_by_one[i], one_by_one[i - 1], "jobs {} and {i} gave the same output", i - 1);
@@ -72,7 +61,7 @@ fn rollout_is_bit_identical_for_any_thread_count() {
         assert_eq!(out.len(), jobs.len());
         for (k, r) in out.iter().enumerate() {
             let tr = r.as_ref().unwrap_or_else(|e| panic!("job {k} failed: {e}"));
-            assert_eq!(bits(tr), one_by_one[k], "job {k} differs with {threads} threads");
+            assert_eq!(traj_bits(tr), one_by_one[k], "job {k} differs with {threads} threads");
         }
     }
     println!("16 jobs ({} f64 each): rollout with 1, 2, 4 threads == run_job one by one, bit for bit", one_by_one[0].len());

@@ -7,26 +7,14 @@
 
 mod common;
 
-use common::Rng;
+use common::{traj_bits, Rng};
 use popup_core::drive::{Drive, Spline3};
 use popup_core::model::{Integrator, Model, Options, Structure};
 use popup_core::params::Params;
 use popup_core::rollout::{rollout, rollout_cached, run_job, shared_motion, Job, MotionCache};
 use std::sync::atomic::AtomicBool;
-use popup_core::sim::{RunConfig, Trajectory};
+use popup_core::sim::RunConfig;
 use popup_core::spec::ArmSpec;
-
-fn bits(tr: &Trajectory) -> Vec<u64> {
-    let mut b: Vec<u64> = tr.data.iter().map(|x| x.to_bits()).collect();
-    b.push(tr.nsample as u64);
-    b.push(tr.final_state.t.to_bits());
-    b.extend(tr.final_state.q.iter().chain(tr.final_state.v.iter()).map(|x| x.to_bits()));
-    for a in &tr.alarms {
-        b.extend([a.link as u64, a.t_start.to_bits(), a.t_end.to_bits(), a.peak_ratio.to_bits()]);
-    }
-    b.extend(tr.warnings.iter().flat_map(|w| w.bytes().map(u64::from)));
-    b
-}
 
 fn replay(rng: &mut Rng) -> RunConfig {
     let t: Vec<f64> = (0..=60).map(|k| k as f64 * 0.01).collect();
@@ -67,27 +55,27 @@ fn family(model: &Model, rng: &mut Rng, n: usize, base: Params) -> Vec<Job> {
         .collect()
 }
 
-fn check_same_bits(model: &Model, jobs: &[Job], expect_shared: bool) {
+fn check_same_traj_bits(model: &Model, jobs: &[Job], expect_shared: bool) {
     let plan = shared_motion(jobs);
     if expect_shared {
         assert!(plan[0].is_none() && plan[1..].iter().all(|b| *b == Some(0)), "plan {plan:?}");
     } else {
         assert!(plan.iter().all(|b| b.is_none()), "plan {plan:?}");
     }
-    let alone: Vec<Vec<u64>> = jobs.iter().map(|j| bits(&run_job(model, j).unwrap())).collect();
+    let alone: Vec<Vec<u64>> = jobs.iter().map(|j| traj_bits(&run_job(model, j).unwrap())).collect();
     for i in 1..alone.len() {
         assert_ne!(alone[i], alone[0], "job {i} gives the rows of job 0: the family varies nothing");
     }
     for threads in [1, 2] {
         for (k, r) in rollout(model, jobs, threads).iter().enumerate() {
             let tr = r.as_ref().unwrap_or_else(|e| panic!("job {k} failed: {e}"));
-            assert_eq!(bits(tr), alone[k], "job {k} ({threads} threads) differs from its own run");
+            assert_eq!(traj_bits(tr), alone[k], "job {k} ({threads} threads) differs from its own run");
         }
     }
 }
 
 #[test]
-fn friction_and_saturation_jobs_share_one_run_and_give_the_same_bits() {
+fn friction_and_saturation_jobs_share_one_run_and_give_the_same_traj_bits() {
     let mut rng = Rng(77);
     for integ in [Integrator::Rk4, Integrator::SemiImplicit] {
         let dt = if integ == Integrator::Rk4 { 1e-3 } else { 2.5e-4 };
@@ -109,7 +97,7 @@ fn friction_and_saturation_jobs_share_one_run_and_give_the_same_bits() {
                 base.effects.backlash.held = [1.0, 1.0, 0.0];
             }
             let jobs = family(&model, &mut rng, 7, base);
-            check_same_bits(&model, &jobs, true);
+            check_same_traj_bits(&model, &jobs, true);
         }
     }
 }
@@ -130,7 +118,7 @@ fn a_gear_with_play_shares_too_its_link_side_is_behind_the_motor_side() {
                 b.effects.backlash.contact_c = [5.0, 5.0, 5.0];
             }
             let jobs = family(&model, &mut rng, 6, b);
-            check_same_bits(&model, &jobs, true);
+            check_same_traj_bits(&model, &jobs, true);
         }
     }
 }
@@ -150,7 +138,7 @@ fn other_structures_share_too_multi_segment_torsion_and_beam_links() {
             base.effects.torsion.c_t = [0.2, 0.0];
         }
         let jobs = family(&model, &mut rng, 4, base);
-        check_same_bits(&model, &jobs, true);
+        check_same_traj_bits(&model, &jobs, true);
     }
 }
 
@@ -168,12 +156,12 @@ fn jobs_that_move_differently_run_on_their_own() {
             3 => jobs[1].params.effects.sensor_delay.encoder = 0.004,
             _ => jobs[1].params.effects.pressure_leak.rate = [0.01, 0.0],
         }
-        check_same_bits(&model, &jobs, false);
+        check_same_traj_bits(&model, &jobs, false);
     }
     // another encoder record: no sharing
     let mut jobs = family(&model, &mut rng, 2, base);
     jobs[1].run = replay(&mut rng);
-    check_same_bits(&model, &jobs, false);
+    check_same_traj_bits(&model, &jobs, false);
 }
 
 #[test]
@@ -192,22 +180,22 @@ fn a_shared_run_that_fails_fails_every_job_with_its_own_error() {
 }
 
 #[test]
-fn a_kept_motion_serves_later_batches_with_the_same_bits() {
+fn a_kept_motion_serves_later_batches_with_the_same_traj_bits() {
     let mut rng = Rng(81);
     let model = Model::compile(&ArmSpec::popup_lab(), Options::default()).unwrap();
     let cache = MotionCache::default();
     let stop = AtomicBool::new(false);
     let jobs = family(&model, &mut rng, 9, Params::defaults(&model));
-    let alone: Vec<Vec<u64>> = jobs.iter().map(|j| bits(&run_job(&model, j).unwrap())).collect();
+    let alone: Vec<Vec<u64>> = jobs.iter().map(|j| traj_bits(&run_job(&model, j).unwrap())).collect();
     // a batch that shares one motion keeps it; later single jobs (a fit's next steps) and
     // batches come from it, the same bits as their own runs
     let first = rollout_cached(&model, &jobs[..3], 2, &stop, Some(&cache));
     for (k, r) in first.iter().enumerate() {
-        assert_eq!(bits(r.as_ref().unwrap()), alone[k]);
+        assert_eq!(traj_bits(r.as_ref().unwrap()), alone[k]);
     }
     for k in 3..9 {
         let r = rollout_cached(&model, &jobs[k..k + 1], 1, &stop, Some(&cache));
-        assert_eq!(bits(r[0].as_ref().unwrap()), alone[k], "job {k} from the kept motion");
+        assert_eq!(traj_bits(r[0].as_ref().unwrap()), alone[k], "job {k} from the kept motion");
     }
     assert_eq!(cache.hits(), 6);
     // other motions (each shared by a pair) push it out after CAPACITY of them; results stay right
@@ -215,13 +203,13 @@ fn a_kept_motion_serves_later_batches_with_the_same_bits() {
         let mut b = Params::defaults(&model);
         b.payload_kg = 0.1 * (n + 1) as f64;
         let other = family(&model, &mut rng, 2, b);
-        let want: Vec<Vec<u64>> = other.iter().map(|j| bits(&run_job(&model, j).unwrap())).collect();
-        let got: Vec<Vec<u64>> = rollout_cached(&model, &other, 2, &stop, Some(&cache)).iter().map(|r| bits(r.as_ref().unwrap())).collect();
+        let want: Vec<Vec<u64>> = other.iter().map(|j| traj_bits(&run_job(&model, j).unwrap())).collect();
+        let got: Vec<Vec<u64>> = rollout_cached(&model, &other, 2, &stop, Some(&cache)).iter().map(|r| traj_bits(r.as_ref().unwrap())).collect();
         assert_eq!(got, want);
     }
     assert_eq!(cache.hits(), 6, "other motions are not this one");
     let again = rollout_cached(&model, &jobs[..1], 1, &stop, Some(&cache));
-    assert_eq!(bits(again[0].as_ref().unwrap()), alone[0]);
+    assert_eq!(traj_bits(again[0].as_ref().unwrap()), alone[0]);
     assert_eq!(cache.hits(), 6, "pushed out: run again");
 }
 

@@ -114,3 +114,17 @@ pub fn replay_2ms(m: &Model, fx: Effects, t: &[f64], y: &[[f64; 3]]) -> Trajecto
 pub fn max_abs_diff(a: &Trajectory, b: &Trajectory, ch: &str) -> f64 {
     col(a, ch).iter().zip(col(b, ch)).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
 }
+
+/// Every f64 of a run as bits (samples, sample count, final state, alarms) and its
+/// warnings: two runs are the same when these are equal.
+pub fn traj_bits(tr: &Trajectory) -> Vec<u64> {
+    let mut b: Vec<u64> = tr.data.iter().map(|x| x.to_bits()).collect();
+    b.push(tr.nsample as u64);
+    b.push(tr.final_state.t.to_bits());
+    b.extend(tr.final_state.q.iter().chain(tr.final_state.v.iter()).map(|x| x.to_bits()));
+    for a in &tr.alarms {
+        b.extend([a.link as u64, a.t_start.to_bits(), a.t_end.to_bits(), a.peak_ratio.to_bits()]);
+    }
+    b.extend(tr.warnings.iter().flat_map(|w| w.bytes().map(u64::from)));
+    b
+}
