@@ -40,8 +40,9 @@ pub fn rollout(model: &Model, jobs: &[Job], threads: usize) -> Vec<Result<Trajec
 ///
 /// A job of an encoder replay whose parameters differ from an earlier
 /// job's only in what acts on the sensor rows alone ([`crate::effects::same_motion`], e.g.
-/// a friction fit's Jacobian) is not run again: its rows are computed at that job's sample
-/// states ([`resample`]), the same bits.
+/// a friction fit's Jacobian) is not run again: its rows are computed from the earlier
+/// run's motion (its bare rows, [`Motion`]) with this job's own sensor effects
+/// ([`resample`]), the same bits.
 pub fn rollout_until(model: &Model, jobs: &[Job], threads: usize, stop: &AtomicBool) -> Vec<Result<Trajectory>> {
     rollout_cached(model, jobs, threads, stop, None)
 }
@@ -50,7 +51,7 @@ pub fn rollout_until(model: &Model, jobs: &[Job], threads: usize, stop: &AtomicB
 type Kept = Arc<Motion>;
 
 /// The motions of recent batches whose jobs shared one ([`rollout_cached`]): a later batch
-/// with that motion (a friction fit's next step) is computed from the states, not run.
+/// with that motion (a friction fit's next step) is computed from its bare rows, not run.
 /// Holds at most [`MotionCache::CAPACITY`] motions, the least recently used dropped first.
 #[derive(Debug, Default)]
 pub struct MotionCache {
