@@ -25,6 +25,7 @@ interrupted benchmark resumes with ``--resume``.
     python benchmarks/bench_diagnosis_families.py --generate-only --n 4          # just the runs
     python benchmarks/bench_diagnosis_families.py --report-only --out DIR        # the tables of what DIR has
     python benchmarks/bench_diagnosis_families.py --styles trapezoid --duration 20 --n 2   # other trajectories, 20 s runs
+    python benchmarks/bench_diagnosis_families.py --rates 100,250 --n 1         # rates outside the default cycle
 
 Each family cycles its runs over the excitation styles (``families.STYLES``: the lab plan of
 min-jerk moves, reversals, chirp and sweep; trapezoidal-velocity point-to-point moves; a
@@ -317,6 +318,10 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
     if eff:
         lines.append("(a) by excitation style: " + ", ".join(f"{st} {sum(1 for r in g if r['outcome']['ok'])}/{len(g)}" for st, g in by.items() if g))
         counts["effect_by_style"] = {st: [sum(1 for r in g if r["outcome"]["ok"]), len(g)] for st, g in by.items() if g}
+        rates = sorted({float(r["truth"].get("rate", math.nan)) for r in eff})
+        by_rate = {f"{rt:g} Hz": [r for r in eff if float(r["truth"].get("rate", math.nan)) == rt] for rt in rates}
+        lines.append("(a) by sample rate: " + ", ".join(f"{k} {sum(1 for r in g if r['outcome']['ok'])}/{len(g)}" for k, g in by_rate.items() if g))
+        counts["effect_by_rate"] = {k: [sum(1 for r in g if r["outcome"]["ok"]), len(g)] for k, g in by_rate.items() if g}
     return "\n".join(lines), {"families": summary, "counts": counts}
 
 
@@ -382,6 +387,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--styles", default=",".join(F.STYLES),
                     help=f"excitation styles cycled over the runs (comma-separated, of {', '.join(F.STYLES)}; default all)")
     ap.add_argument("--duration", type=float, default=None, help="every run this long [s] (default: drawn, 10-14 s)")
+    ap.add_argument("--rates", default=None, help="sample rates [Hz] cycled over the runs instead of 200/500/1000 (comma-separated, "
+                    f"each dividing 1 kHz; e.g. {','.join(f'{r:g}' for r in F.OTHER_RATES)})")
     ap.add_argument("--diagnose-args", default="", help="extra arguments for popup diagnose (one string, split on spaces)")
     ap.add_argument("--pool", nargs="+", metavar="DIR", help="only the tables, over every result cached in these --out folders "
                     "(re-classified with this script; e.g. several seeds pooled)")
@@ -399,6 +406,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if st not in F.STYLES:
             ap.error(f"--styles: {st!r} is not one of {', '.join(F.STYLES)}")
     ov: Dict[str, Any] = {"styles": styles}
+    if a.rates:
+        try:
+            ov["rates"] = [float(x) for x in a.rates.split(",") if x.strip()]
+        except ValueError:
+            ap.error(f"--rates: {a.rates!r} is not a comma-separated list of numbers")
+        bad = [r for r in ov["rates"] if not (r > 0 and abs(1000.0 / r - round(1000.0 / r)) < 1e-9)]
+        if bad:
+            ap.error(f"--rates: {', '.join(f'{r:g}' for r in bad)} Hz: each rate's period must divide 1 ms")
     if a.duration is not None:
         if not a.duration >= 2.0:
             ap.error(f"--duration: {a.duration} s; expected at least 2 s")

@@ -122,6 +122,12 @@ EFFECT_FAMILIES: Dict[str, List[str]] = {
 #: operator), the law popup tries as an alternative of the free gear
 FAMILY_KINDS = ("nominal", "pairs", "disturbance", "backlash_held", *LIBRARY)
 CHANNEL_SETS = ("full", "no_mocap", "no_torque", "pressure_noisy")
+
+
+OTHER_RATES = (100.0, 250.0)
+"""Sample rates [Hz] outside the default cycle (200/500/1000 Hz), for ``family_specs(rates=...)``
+(``bench_diagnosis_families.py --rates``): a lab logging at 100 Hz sees a second bending
+mode near its Nyquist frequency, at 250 Hz an encoder's steps 4 ms apart."""
 MEAS_ORDER = ["t", "q1", "q2", "q3", "tau1", "tau2", "tau3", "ee_x", "ee_y", "ee_z",
               "imu1_ax", "imu1_ay", "imu1_az", "imu2_ax", "imu2_ay", "imu2_az", "p1", "p2"]
 OUT_CHANNELS = MEAS_ORDER[1:16]  # what both engines simulate (the pressures are p(t))
@@ -1440,7 +1446,8 @@ def _channel_options(effects: Sequence[str], engine: str) -> List[str]:
     return opts
 
 
-def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[Sequence[str]] = None, **overrides: Any) -> List[RunSpec]:
+def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[Sequence[str]] = None, rates: Optional[Sequence[float]] = None,
+                 **overrides: Any) -> List[RunSpec]:
     """The ``n`` run specs of a family: ``kind`` is an effect name (that effect alone,
     levels alternating near/above), ``"pairs"`` (two effects, cycling :data:`PAIRS`),
     ``"nominal"`` (nothing hidden) or ``"disturbance"`` (a periodic disturbance outside
@@ -1448,7 +1455,9 @@ def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[
     jittered stamps (half the runs), channel set (cycled over the sets the truth can be
     seen in), dropouts, noise × 0.3-3 (log-uniform; drag ≤ 1), encoder 12/14/16 bits,
     payload, pressures, excitation (its style cycled over :data:`STYLES`, or over ``styles``;
-    the trajectory drawn per run), duration 10-14 s. The cycles start at a phase of
+    the trajectory drawn per run), duration 10-14 s. ``rates`` [Hz]: cycle over these
+    instead (e.g. :data:`OTHER_RATES`, rates a lab also records at; each must divide
+    1 kHz, popup's replay rate), the other draws unchanged. The cycles start at a phase of
     their own per family, so that even ``n = 1`` spreads rates, channel sets and levels
     over the families. ``overrides`` set any :class:`RunSpec` field of every run after the
     draw (e.g. ``duration=3.0`` for quick tests)."""
@@ -1459,6 +1468,9 @@ def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[
     for st in styles or ():
         if st not in STYLES:
             raise ValueError(f"excitation style {st!r}: expected one of {STYLES}")
+    for r in rates or ():
+        if not (r > 0 and abs(1000.0 / r - round(1000.0 / r)) < 1e-9):
+            raise ValueError(f"rate {r!r} Hz: expected a rate whose period divides 1 ms (1000/rate an integer)")
     if kind in LIBRARY and kind not in EFFECT_FAMILIES[engine]:
         raise ValueError(f"the {engine} engine has no {kind} family (see the families module docs)")
     specs = []
@@ -1475,10 +1487,10 @@ def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[
             names = []
         off = zlib.crc32(f"{engine}/{kind}".encode()) + int(seed)  # a family's own phase in the cycles below
         level = "above" if ((kind not in LIBRARY and kind != "backlash_held") or kind == "higher_bending_modes") else ("near", "above")[(i + off) % 2]
-        rates = [500.0, 1000.0] if "higher_bending_modes" in names else [500.0, 200.0, 1000.0]
+        cycle = [float(r) for r in rates] if rates else [500.0, 1000.0] if "higher_bending_modes" in names else [500.0, 200.0, 1000.0]
         chans = _channel_options(names, engine)
         sp = RunSpec(engine=engine, family=kind, index=i, seed=int(seed), level=level)
-        sp.rate = rates[(i + off) % len(rates)]
+        sp.rate = cycle[(i + off) % len(cycle)]
         sp.jitter = _r(rng.uniform(0.05, 0.2)) if rng.random() < 0.5 else 0.0
         sp.channels = chans[(i // 2 + off) % len(chans)] if kind in LIBRARY else chans[(i + off) % len(chans)]
         sp.dropouts = bool(rng.random() < 0.4)

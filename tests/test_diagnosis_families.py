@@ -11,10 +11,10 @@ a few runs is ``@pytest.mark.slow`` (``pytest -m slow``); the whole families are
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 import math
-import re
 import sys
 import warnings
 from pathlib import Path
@@ -202,6 +202,27 @@ def test_variations_are_really_in_the_files(tmp_path):
     e = (y - smooth)[200:-200]
     assert noise_std(t[200:-200], e) < 0.6 * F.NOISE["imu"]
     assert 0.8 * F.NOISE["imu"] < noise_std(t[200:-200], e, correlation_s=CORRELATION_S) < 1.25 * F.NOISE["imu"]
+
+
+def test_other_rates_change_the_rate_and_nothing_else_drawn(tmp_path):
+    """``rates=`` cycles the given rates over a family and leaves every other draw as it
+    was; a rate whose period does not divide popup's 1 ms replay step is refused."""
+    for kind in ("backlash", "higher_bending_modes", "pairs", "nominal"):
+        base = F.family_specs(kind, "mujoco", 4, 3)
+        other = F.family_specs(kind, "mujoco", 4, 3, rates=F.OTHER_RATES)
+        assert {sp.rate for sp in other} == set(F.OTHER_RATES)
+        for a, b in zip(base, other):
+            da, db = dataclasses.asdict(a), dataclasses.asdict(b)
+            for key in ("rate", "noise_lowpass_hz"):  # a sensor's low-pass is drawn below its Nyquist rate
+                da.pop(key), db.pop(key)
+            assert da == db
+            assert b.noise_lowpass_hz == 0.0 or b.noise_lowpass_hz <= 0.3 * b.rate + 1e-9 or b.rate >= 300
+    with pytest.raises(ValueError, match="333"):
+        F.family_specs("nominal", "popup", 1, 0, rates=[333.0])
+    sp = F.family_specs("nominal", "popup", 2, 0, rates=[100.0], duration=3.0)[0]
+    path, truth = F.make_run(sp, tmp_path / "r100")
+    t = _read(path).time
+    assert truth["rate"] == 100.0 and abs(float(np.median(np.diff(t))) - 0.01) < 1e-9
 
 
 @pytest.mark.parametrize("style", F.STYLES)
