@@ -13,6 +13,7 @@ import pytest
 
 import popup
 from popup import diagnosis as dg
+from popup import estimate as est
 from popup.diagnosis import candidate as dgc
 from popup.diagnosis import loop as dgl
 from popup.diagnosis import rules as dgr
@@ -561,3 +562,30 @@ def test_friction_is_judged_on_the_torques_beside_an_imu_error_no_effect_explain
     # the rule reads the core's registry: friction acts on the torques, a payload on everything
     assert popup.effects.acts_only_on("joint_friction", ["tau_c", "b"], d.problem.channels) == ["tau1", "tau2", "tau3"]
     assert popup.effects.acts_only_on("payload_mass", ["delta_kg"], d.problem.channels) is None
+
+
+def test_the_compliant_flanks_variant_is_run_at_a_step_every_plausible_flank_allows():
+    """The step of the compliant-flanks variant comes from the linearised stability limit of
+    the gear at its stiffest plausible flank, with the margin. A flank exists only past a
+    gap, so the check model needs one on every joint: with the gap left at 0 the flank was
+    not in the linearisation (a 39 ms limit) and the variant ran at the run's 1 ms, where
+    stiff, damped flanks diverge (a MuJoCo backlash run: "variant compliant flanks not
+    tested: DivergenceError ... joint d22"). The step chosen must be stable at every corner
+    of the fitted box (k_c, c_c), the overdamped soft flank included."""
+    var = next(v for v in dgr.VARIANTS["backlash"] if v["name"] == "compliant flanks")
+    m = popup.Model("popup-lab").with_effect("backlash", **var["structure"])
+    check = m.with_effect("backlash", **var["stiffest"])
+    q0 = [0.1, 0.4, 0.5]
+
+    def limit(model):
+        return model.with_dt(1.0).stable_dt([float(x) for x in model.rest_state(q0)], replay=True)
+
+    assert all(g > 0 for g in check.effects["backlash"]["gap"])
+    assert limit(check.with_effect("backlash", gap=[0.0] * 3)) > 1e-2  # no gap, no flank: only the arm's own modes
+    step = dgr.STABILITY_MARGIN * limit(check)
+    assert step < 1e-3  # the run's own step is not enough for the stiffest flank
+    (k_lo, k_hi), (c_lo, c_hi) = est.BOUNDS[("backlash", "contact_k")], est.BOUNDS[("backlash", "contact_c")]
+    for k in (k_lo, k_hi):
+        for c in (c_lo, c_hi):
+            corner = check.with_effect("backlash", contact_k=[k] * 3, contact_c=[c] * 3)
+            assert step < limit(corner), (k, c, step, limit(corner))

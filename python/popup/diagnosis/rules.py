@@ -113,10 +113,13 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
                  {"name": "held link side (play operator)", "structure": {"held": [1.0, 1.0, 1.0]}, "alternative": True},
                  # a compliant gear: its flanks a unilateral spring-damper (the elasto-backlash
                  # law of Modelica and Simscape), which also carries the gear's own compliance
-                 # while it pushes; run at the step of its stiffest plausible flank
+                 # while it pushes; run at the step of its stiffest plausible flank (the
+                 # check needs a gap on every joint: a joint without one has no flank, and
+                 # its stiffness would not be in the linearisation at all)
                  {"name": "compliant flanks", "extra": ["contact_k", "contact_c"],
                   "structure": {"contact_k": [1e4, 1e4, 1e4], "contact_c": [5.0, 5.0, 5.0]},
-                  "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [est.BOUNDS[("backlash", "contact_c")][1]] * 3},
+                  "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [est.BOUNDS[("backlash", "contact_c")][1]] * 3,
+                               "gap": [1e-3] * 3},
                   "seeds": [{"contact_k": 3e3, "contact_c": 3.0}, {"contact_k": 3e4, "contact_c": 10.0}, {"contact_k": 1e5, "contact_c": 30.0}]}],
     "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
                 {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
