@@ -408,12 +408,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ov: Dict[str, Any] = {"styles": styles}
     if a.rates:
         try:
-            ov["rates"] = [float(x) for x in a.rates.split(",") if x.strip()]
-        except ValueError:
-            ap.error(f"--rates: {a.rates!r} is not a comma-separated list of numbers")
-        bad = [r for r in ov["rates"] if not (r > 0 and abs(1000.0 / r - round(1000.0 / r)) < 1e-9)]
-        if bad:
-            ap.error(f"--rates: {', '.join(f'{r:g}' for r in bad)} Hz: each rate's period must divide 1 ms")
+            ov["rates"] = F.check_rates([x for x in a.rates.split(",") if x.strip()])
+        except ValueError as e:
+            ap.error(f"--rates: {e}")
     if a.duration is not None:
         if not a.duration >= 2.0:
             ap.error(f"--duration: {a.duration} s; expected at least 2 s")

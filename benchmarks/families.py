@@ -1446,6 +1446,16 @@ def _channel_options(effects: Sequence[str], engine: str) -> List[str]:
     return opts
 
 
+def check_rates(rates: Sequence[float]) -> List[float]:
+    """``rates`` [Hz] as floats, each one whose period divides 1 ms (popup's replay step and
+    the generators' output grid); ``ValueError`` naming the first that does not."""
+    out = [float(r) for r in rates]
+    for r in out:
+        if not (r > 0 and abs(1000.0 / r - round(1000.0 / r)) < 1e-9):
+            raise ValueError(f"rate {r:g} Hz: expected a rate whose period divides 1 ms (1000/rate an integer)")
+    return out
+
+
 def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[Sequence[str]] = None, rates: Optional[Sequence[float]] = None,
                  **overrides: Any) -> List[RunSpec]:
     """The ``n`` run specs of a family: ``kind`` is an effect name (that effect alone,
@@ -1468,9 +1478,7 @@ def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[
     for st in styles or ():
         if st not in STYLES:
             raise ValueError(f"excitation style {st!r}: expected one of {STYLES}")
-    for r in rates or ():
-        if not (r > 0 and abs(1000.0 / r - round(1000.0 / r)) < 1e-9):
-            raise ValueError(f"rate {r!r} Hz: expected a rate whose period divides 1 ms (1000/rate an integer)")
+    check_rates(rates or ())
     if kind in LIBRARY and kind not in EFFECT_FAMILIES[engine]:
         raise ValueError(f"the {engine} engine has no {kind} family (see the families module docs)")
     specs = []
