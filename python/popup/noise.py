@@ -29,11 +29,11 @@ plateau from stride 2 on is taken as that, and the stride-2 value is σ.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, List, NamedTuple, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["noise_std", "DIFFERENCE_ORDER", "CORRELATION_S"]
+__all__ = ["noise_std", "noise_stds", "DIFFERENCE_ORDER", "CORRELATION_S"]
 
 DIFFERENCE_ORDER = 4
 """Order k of the divided differences (removes cubics; the smooth part leaks ~ h⁴)."""
@@ -90,6 +90,61 @@ def _estimate(t: np.ndarray, y: np.ndarray, k: int, max_gap: float, med: float, 
     return float(math.sqrt(np.mean(u)))
 
 
+class _Strides(NamedTuple):
+    """The estimates of one channel at strides 1, 2, 4 … (``seq``), the one taken
+    (``sigma``) and whether its colour was resolved (``resolved``: white, or a plateau
+    reached; else the stride-1 value was kept although the estimate grew)."""
+
+    sigma: float
+    seq: Tuple[float, ...]
+    resolved: bool
+
+
+def _strides(t: np.ndarray, y: np.ndarray, k: int, max_gap: float, robust: bool, correlation_s: float) -> _Strides:
+    ok = np.isfinite(t) & np.isfinite(y)
+    t, y = t[ok], y[ok]
+    if t.size - k < 2:
+        return _Strides(math.nan, (), True)
+    med = float(np.median(np.diff(t)))
+    if not med > 0:
+        return _Strides(math.nan, (), True)
+    est = _estimate(t, y, k, max_gap, med, 1, robust)
+    if not (correlation_s > 0 and math.isfinite(est) and est > 0):
+        return _Strides(est, (est,), True)
+    # the estimates at strides 1, 2, 4 …; coloured noise: growth ratios that fall to a
+    # plateau; the signal's curvature: ratios that do not fall (→ 2^k)
+    seq = [est]
+    stride = 1
+    while 2 * stride * med <= correlation_s * (1 + 1e-9) and t.size // (2 * stride) > 4 * (k + 2):
+        stride *= 2
+        nxt = _estimate(t, y, k, max_gap, med, stride, robust)
+        if not (math.isfinite(nxt) and nxt > 0):
+            break
+        seq.append(nxt)
+    out = tuple(seq)
+    sig = math.exp(_SAMPLE_COLOUR_SD * _WHITE_SCATTER / math.sqrt(t.size))
+    if len(seq) > 2 and sig < seq[1] / seq[0] < _COLOURED and seq[2] / seq[1] <= _PLATEAU:
+        # a significant first growth, then a plateau from stride 2 on: noise coloured at the
+        # sample scale (a low-pass near the Nyquist frequency, whose zero there the stride-1
+        # differences weigh most: 0.83-0.91 × σ at 0.9-0.95 × Nyquist); a smooth systematic
+        # error would have grown faster at the next stride instead (×16 per stride)
+        return _Strides(seq[1], out, True)
+    growth, last = math.inf, 0
+    for i in range(1, len(seq)):
+        g = seq[i] / seq[i - 1]
+        if g <= _PLATEAU:
+            return _Strides(seq[i] if i > 1 else seq[0], out, True)
+        if i == 1 and g < _COLOURED:
+            return _Strides(seq[0], out, True)  # white noise plus the signal's curvature
+        if g >= growth:
+            break  # the signal's curvature takes over
+        growth, last = g, i
+    # no plateau: the last estimate before the signal took over, if it was close to one
+    if last and growth <= _NEAR_PLATEAU:
+        return _Strides(seq[last], out, True)
+    return _Strides(seq[0], out, len(seq) < 2)
+
+
 def noise_std(t: Any, y: Any, *, order: int = DIFFERENCE_ORDER, max_gap: float = 3.0, robust: bool = True,
               correlation_s: float = 0.0) -> float:
     """White-noise standard deviation of ``y`` sampled at ``t`` (same unit as ``y``);
@@ -101,7 +156,8 @@ def noise_std(t: Any, y: Any, *, order: int = DIFFERENCE_ORDER, max_gap: float =
     with the stride, each growth smaller than the last (coloured noise decorrelating) up
     to a plateau (growth below 10 %), the plateau is the noise; where the signal's own
     curvature takes over first (growth that speeds up), the last estimate before it, if
-    its growth was below 30 %. Otherwise, and for white noise, the stride-1 value.
+    its growth was below 30 %. Otherwise, and for white noise, the stride-1 value
+    (:func:`noise_stds` then takes the colour from the channel's sibling sensors).
 
     >>> import numpy as np
     >>> t = np.arange(20000) / 500.0
@@ -111,43 +167,47 @@ def noise_std(t: Any, y: Any, *, order: int = DIFFERENCE_ORDER, max_gap: float =
     """
     t = np.asarray(t, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
-    ok = np.isfinite(t) & np.isfinite(y)
-    t, y = t[ok], y[ok]
-    k = int(order)
-    if t.size - k < 2:
-        return math.nan
-    med = float(np.median(np.diff(t)))
-    if not med > 0:
-        return math.nan
-    est = _estimate(t, y, k, max_gap, med, 1, robust)
-    if not (correlation_s > 0 and math.isfinite(est) and est > 0):
-        return est
-    # the estimates at strides 1, 2, 4 …; coloured noise: growth ratios that fall to a
-    # plateau; the signal's curvature: ratios that do not fall (→ 2^k)
-    seq = [est]
-    stride = 1
-    while 2 * stride * med <= correlation_s * (1 + 1e-9) and t.size // (2 * stride) > 4 * (k + 2):
-        stride *= 2
-        nxt = _estimate(t, y, k, max_gap, med, stride, robust)
-        if not (math.isfinite(nxt) and nxt > 0):
-            break
-        seq.append(nxt)
-    sig = math.exp(_SAMPLE_COLOUR_SD * _WHITE_SCATTER / math.sqrt(t.size))
-    if len(seq) > 2 and sig < seq[1] / seq[0] < _COLOURED and seq[2] / seq[1] <= _PLATEAU:
-        # a significant first growth, then a plateau from stride 2 on: noise coloured at the
-        # sample scale (a low-pass near the Nyquist frequency, whose zero there the stride-1
-        # differences weigh most: 0.83-0.91 × σ at 0.9-0.95 × Nyquist); a smooth systematic
-        # error would have grown faster at the next stride instead (×16 per stride)
-        return seq[1]
-    growth, last = math.inf, 0
-    for i in range(1, len(seq)):
-        g = seq[i] / seq[i - 1]
-        if g <= _PLATEAU:
-            return seq[i] if i > 1 else seq[0]
-        if i == 1 and g < _COLOURED:
-            return seq[0]  # white noise plus the signal's curvature
-        if g >= growth:
-            break  # the signal's curvature takes over
-        growth, last = g, i
-    # no plateau: the last estimate before the signal took over, if it was close to one
-    return seq[last] if last and growth <= _NEAR_PLATEAU else seq[0]
+    return _strides(t, y, int(order), max_gap, robust, correlation_s).sigma
+
+
+def noise_stds(t: Any, ys: Sequence[Any], kinds: Sequence[str], *, order: int = DIFFERENCE_ORDER, max_gap: float = 3.0,
+               robust: bool = True, correlation_s: float = CORRELATION_S) -> List[float]:
+    """:func:`noise_std` of each channel of ``ys`` (sampled at ``t``), with the colour of a
+    channel whose own estimate did not resolve it taken from the channels of its sensor
+    kind (``kinds[i]``, e.g. :data:`popup.results.SENSORS`) that did.
+
+    A channel with a systematic error in the band where its noise decorrelates (at 100 Hz a
+    1-pole low-pass at 23 Hz, with an 11 Hz replay error beside it) shows an estimate that
+    keeps growing with the stride: no plateau, so :func:`noise_std` keeps its stride-1 value,
+    which a low-pass with its zero at the Nyquist frequency puts at 0.4 × σ. The ratio
+    σ / (stride-1 estimate) depends only on the noise's autocorrelation, the sensor's
+    filter, not on its level; a lab sets the axes (the units) of one kind of sensor alike,
+    so the median ratio of the resolved channels of its kind, where it shows a coloured
+    noise (at least the growth ``_COLOURED`` of a low-pass below 0.3 × the rate), is applied
+    to the unresolved one's stride-1 value, but never beyond what any of its own longer
+    strides allows: there its estimate is the noise's share at that stride (the kin's
+    profile, estimate/σ) plus a systematic error, which only adds. A channel with no resolved kin keeps :func:`noise_std`'s value."""
+    t = np.asarray(t, dtype=np.float64)
+    if len(kinds) != len(ys):
+        raise ValueError(f"noise_stds: {len(ys)} channels but {len(kinds)} kinds")
+    res = [_strides(t, np.asarray(y, dtype=np.float64), int(order), max_gap, robust, correlation_s) for y in ys]
+    out = [r.sigma for r in res]
+    for i, r in enumerate(res):
+        if r.resolved or not (len(r.seq) > 1 and r.seq[0] > 0):
+            continue
+        kin = [q for j, q in enumerate(res) if j != i and kinds[j] == kinds[i] and q.resolved and len(q.seq) > 1
+               and math.isfinite(q.sigma) and q.seq[0] > 0]
+        if not kin:
+            continue
+        ratio = float(np.median([q.sigma / q.seq[0] for q in kin]))
+        if ratio < _COLOURED:
+            continue  # kin with white noise (or nearly): the stride-1 value stands
+        # every stride bounds σ from above: its estimate is the noise's share there (the
+        # kin's profile, estimate/σ) plus a systematic error that only adds
+        bound = math.inf
+        for k in range(1, len(r.seq)):
+            prof = [q.seq[k] / q.sigma for q in kin if k < len(q.seq)]
+            if prof:
+                bound = min(bound, r.seq[k] / max(float(np.median(prof)), 1e-12))
+        out[i] = float(max(min(r.seq[0] * ratio, bound), r.seq[0]))
+    return out

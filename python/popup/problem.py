@@ -62,8 +62,8 @@ import numpy as np
 
 from .exceptions import InputError, MeasuredRunError, StepTooLargeError
 from .io import MeasuredRun
-from .noise import CORRELATION_S, noise_std
-from .results import CHANNELS
+from .noise import CORRELATION_S, noise_std, noise_stds
+from .results import CHANNELS, SENSORS
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import Model
@@ -411,7 +411,7 @@ class ReplayProblem:
         self._nominal = None
         # noise floor from the nominal residual (its smooth systematic part is removed by the differences)
         z = self.nominal_simulation() - self.measured
-        self.sigma = np.array([_floor_of(self.time, z[:, j], self.measured[:, j]) for j in range(len(self.channels))])
+        self.sigma = np.array(_floors(self.time, z, self.measured, self.channels))
         if not self.closed and not run.initial:
             # a record that starts in motion, with no [initial] table: the bending state at
             # its start is unknown and the replay (from rest) rings for a while; leave it out
@@ -561,7 +561,7 @@ class ReplayProblem:
         if z is None:
             z = self.residuals(self.nominal_simulation())
         r = np.asarray(z) * self.sigma
-        return {c: _floor_of(self.time, r[:, j], self.measured[:, j]) for j, c in enumerate(self.channels)}
+        return dict(zip(self.channels, _floors(self.time, r, self.measured, self.channels)))
 
     @property
     def encoder_sigma(self) -> np.ndarray:
@@ -843,11 +843,17 @@ def systematic(ms: np.ndarray) -> float:
     return float(math.sqrt(max(float(np.mean(ms)) - 1.0, 0.0)))
 
 
-def _floor_of(t: np.ndarray, resid: np.ndarray, y: np.ndarray) -> float:
-    s = noise_std(t, resid, correlation_s=CORRELATION_S)
-    if not (math.isfinite(s) and s > 0):
-        s = noise_std(t, y, correlation_s=CORRELATION_S)
-    return s if math.isfinite(s) else 0.0
+def _floors(t: np.ndarray, resid: np.ndarray, y: np.ndarray, channels: Sequence[str]) -> List[float]:
+    """The noise floor of each channel (columns of ``resid``) from its residual, with the
+    colour a channel leaves unresolved taken from its sensor kind (:func:`noise_stds`);
+    from the measured ``y`` where the residual gives none."""
+    s = noise_stds(t, [resid[:, j] for j in range(resid.shape[1])], [SENSORS.get(c, c) for c in channels], correlation_s=CORRELATION_S)
+    out = []
+    for j, v in enumerate(s):
+        if not (math.isfinite(v) and v > 0):
+            v = noise_std(t, y[:, j], correlation_s=CORRELATION_S)
+        out.append(v if math.isfinite(v) else 0.0)
+    return out
 
 
 def _split(t: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:

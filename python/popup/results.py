@@ -14,10 +14,13 @@ import numpy as np
 
 from . import _core
 
-__all__ = ["SimResult", "BatchResult", "WrinkleAlarm", "CHANNELS", "UNITS"]
+__all__ = ["SimResult", "BatchResult", "WrinkleAlarm", "CHANNELS", "UNITS", "SENSORS"]
 
 CHANNELS: List[str] = list(_core.Model.channels())
 UNITS: Dict[str, str] = dict(zip(CHANNELS, _core.Model.units()))
+#: The kind of sensor that records each channel (``clock``, ``encoder``, ``drive``, ``mocap``,
+#: ``imu``, ``pressure``; ``model`` for what no lab measures), from the core.
+SENSORS: Dict[str, str] = dict(zip(CHANNELS, _core.Model.sensors()))
 _IDX = {c: i for i, c in enumerate(CHANNELS)}
 
 # named groups of channels -> attribute names

@@ -40,6 +40,17 @@ pub const UNITS: [&str; NCH] = [
     "Pa", "Pa", "rad", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s", "rad/s", "N·m", "N·m", "N·m", "N·m", "1", "1", "J",
 ];
 
+/// The kind of sensor that records each channel of [`CHANNELS`], same order: `clock`,
+/// `encoder`, `drive` (the motor torque read), `mocap`, `imu`, `pressure`, or `model` for a
+/// quantity no lab measures (bending angles and moments, energy). Channels of one kind share
+/// its signal chain: a lab sets every IMU (every drive) alike, so the colour of their noise
+/// (the sensor's own low-pass, as a ratio to white noise) is one property of the kind.
+pub const SENSORS: [&str; NCH] = [
+    "clock", "encoder", "encoder", "encoder", "encoder", "encoder", "encoder", "drive", "drive", "drive", "mocap", "mocap", "mocap", "imu", "imu",
+    "imu", "imu", "imu", "imu", "pressure", "pressure", "model", "model", "model", "model", "model", "model", "model", "model", "model", "model",
+    "model", "model", "model", "model", "model",
+];
+
 /// Column index of a channel name.
 pub fn channel_index(name: &str) -> Option<usize> {
     CHANNELS.iter().position(|c| *c == name)

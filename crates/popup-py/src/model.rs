@@ -167,6 +167,11 @@ impl PyModel {
     fn units() -> Vec<&'static str> {
         UNITS.to_vec()
     }
+    /// The kind of sensor that records each output channel (`popup_core::sensor::SENSORS`).
+    #[staticmethod]
+    fn sensors() -> Vec<&'static str> {
+        popup_core::sensor::SENSORS.to_vec()
+    }
 
     /// Derived per-rollout numbers: dict(k, c, mw, warnings).
     fn param_data<'py>(&self, py: Python<'py>, payload_kg: f64, pressure_pa: [f64; 2]) -> PyResult<Bound<'py, PyDict>> {
