@@ -199,5 +199,8 @@ def test_white_kin_and_other_kinds_change_nothing():
         t, ys, sig = _kin(rng, rate, 30.0)
         kinds = ["drive"] * 3 + ["imu"] * 3  # the hidden-colour channels have no kin that resolved
         assert noise_stds(t, ys, kinds)[:3] == [noise_std(t, y, correlation_s=0.05) for y in ys[:3]]
-    with pytest.raises(ValueError, match="kinds"):
+    from popup.exceptions import PopupError
+
+    with pytest.raises(PopupError, match="kinds") as e:
         noise_stds(t, ys, ["imu"])
+    assert isinstance(e.value, ValueError)

@@ -24,6 +24,10 @@ A low-pass just below the Nyquist frequency leaves nothing correlated over a few
 but takes out the band stride-1 differences weigh most (0.8–0.9 × σ at 0.9–0.95 ×
 Nyquist): a first growth significant against white noise's own scatter followed by a
 plateau from stride 2 on is taken as that, and the stride-2 value is σ.
+
+Under a large misfit (a hidden effect's error in the band where the noise decorrelates)
+one channel alone cannot tell its noise's colour from that error; :func:`noise_stds` takes
+it from the channels of the same sensor kind that resolve it.
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ import math
 from typing import Any, List, NamedTuple, Sequence, Tuple
 
 import numpy as np
+
+from .exceptions import InputError
 
 __all__ = ["noise_std", "noise_stds", "DIFFERENCE_ORDER", "CORRELATION_S"]
 
@@ -186,10 +192,11 @@ def noise_stds(t: Any, ys: Sequence[Any], kinds: Sequence[str], *, order: int = 
     noise (at least the growth ``_COLOURED`` of a low-pass below 0.3 × the rate), is applied
     to the unresolved one's stride-1 value, but never beyond what any of its own longer
     strides allows: there its estimate is the noise's share at that stride (the kin's
-    profile, estimate/σ) plus a systematic error, which only adds. A channel with no resolved kin keeps :func:`noise_std`'s value."""
+    profile, estimate/σ) plus a systematic error, which only adds. A channel with no
+    resolved kin keeps :func:`noise_std`'s value."""
     t = np.asarray(t, dtype=np.float64)
     if len(kinds) != len(ys):
-        raise ValueError(f"noise_stds: {len(ys)} channels but {len(kinds)} kinds")
+        raise InputError(f"input kinds: {len(kinds)} sensor kinds for {len(ys)} channels; give one kind per channel")
     res = [_strides(t, np.asarray(y, dtype=np.float64), int(order), max_gap, robust, correlation_s) for y in ys]
     out = [r.sigma for r in res]
     for i, r in enumerate(res):
