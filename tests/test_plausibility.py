@@ -43,6 +43,20 @@ def test_the_registry_is_the_engines_and_covers_every_channel():
         assert unit == pio.UNITS[c] and warn <= err and advice
 
 
+def test_every_measured_channel_has_its_sensor_kind_in_the_core_registry():
+    """``popup.results.SENSORS`` (``popup_core::sensor::SENSORS``): one kind per channel;
+    every column of the run format is recorded by a sensor, the axes of both IMUs are one
+    kind, and what no lab measures is ``model``."""
+    from popup.results import CHANNELS, SENSORS
+
+    assert list(SENSORS) == CHANNELS
+    measured = [c for c in pio.MEASURED_COLUMNS if c in CHANNELS]
+    assert measured and all(SENSORS[c] not in ("model", "") for c in measured), {c: SENSORS[c] for c in measured}
+    assert {SENSORS[c] for c in CHANNELS if c.startswith("imu")} == {"imu"}
+    assert {SENSORS[c] for c in ("tau1", "tau2", "tau3")} == {"drive"} and SENSORS["ee_x"] == "mocap"
+    assert all(SENSORS[c] == "model" for c in CHANNELS if c not in pio.MEASURED_COLUMNS)
+
+
 @pytest.mark.parametrize("last_t", [1e9, 1e300])
 def test_absurd_time_stamp_is_named_before_anything_runs(tmp_path, last_t):
     d = base()
