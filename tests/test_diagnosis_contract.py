@@ -468,23 +468,10 @@ def test_the_swap_offers_only_candidates_some_round_found_significant(nominal, t
     assert len(h.notes) == len(offered) and all(n.startswith("swap of ") for n in h.notes), h.notes
 
 
-def test_noise_floors_a_large_misfit_biased_are_re_estimated_as_the_model_improves(nominal, tmp_path, monkeypatch):
-    """The noise floors come from the nominal residual. Under a large misfit (a payload
-    0.4 kg off) the estimator is biased: down by 4× on channels whose noise is coloured (a
-    sensor's 45 Hz low-pass at 200 Hz: neighbouring samples alike, and the misfit's rough
-    part hides the colour), up on others. A refitted model's residual gives each channel's
-    noise back; the loop takes it, decides in it and says so.
-
-    Here each channel is its own sensor kind (a lab whose IMU axes share nothing), so no
-    kin lends its colour (:func:`popup.noise.noise_stds`; with the registry's kinds the other
-    IMU axes resolve it and no first floor is below 0.8 ×:
-    ``test_the_kin_colour_mends_the_first_floors_of_that_run``)."""
+def _coloured_payload_run(nominal, tmp_path):
+    """A payload 0.4 kg off the nominal, IMU noise through a sensor's 45 Hz 2-pole low-pass
+    at 200 Hz (8 s lab plan): (run, truth model, the IMU channels, each one's true σ)."""
     from scipy.signal import butter, lfilter
-
-    import popup.problem as pm
-    from popup.problem import ReplayProblem
-
-    monkeypatch.setattr(pm, "SENSORS", {c: c for c in pm.CHANNELS})
 
     t, q = popup.synth.lab_trajectory(8.0, rate=200.0, seed=29)
     rng = np.random.default_rng(3)
@@ -502,6 +489,26 @@ def test_noise_floors_a_large_misfit_biased_are_re_estimated_as_the_model_improv
 
     truth = nominal.with_effect("payload_mass", delta_kg=0.4)
     run = popup.synth.measured_run(truth, t, q, tmp_path, seed=29, noise={"tau": 0.05, "ee": 2e-4, "imu": 0.0}, disturbance=coloured)
+    return run, truth, imu, true
+
+
+def test_noise_floors_a_large_misfit_biased_are_re_estimated_as_the_model_improves(nominal, tmp_path, monkeypatch):
+    """The noise floors come from the nominal residual. Under a large misfit (a payload
+    0.4 kg off) the estimator is biased: down by 4× on channels whose noise is coloured (a
+    sensor's 45 Hz low-pass at 200 Hz: neighbouring samples alike, and the misfit's rough
+    part hides the colour), up on others. A refitted model's residual gives each channel's
+    noise back; the loop takes it, decides in it and says so.
+
+    Here each channel is its own sensor kind (a lab whose IMU axes share nothing), so no
+    kin lends its colour (:func:`popup.noise.noise_stds`; with the registry's kinds the other
+    IMU axes resolve it and no first floor is below 0.8 ×:
+    ``test_the_kin_colour_mends_the_first_floors_of_that_run``)."""
+    import popup.problem as pm
+    from popup.problem import ReplayProblem
+
+    monkeypatch.setattr(pm, "SENSORS", {c: c for c in pm.CHANNELS})
+
+    run, truth, imu, true = _coloured_payload_run(nominal, tmp_path)
     p0 = ReplayProblem(nominal, run, threads=0)
     assert min(p0.noise[c] / true[c] for c in imu) < 0.5  # the bias the check is for
     cp = p0.with_model(truth)
@@ -550,29 +557,12 @@ def test_the_kin_colour_mends_the_first_floors_of_that_run(nominal, tmp_path):
     the misfit hides take it from the axes that resolve it: alone two read 0.24-0.27 × the
     noise added, with their kin none is below 0.8 × (nor above 1.5 ×: the axes that resolve
     the colour carry 25-45 % of the misfit at their plateau's stride, as they did before)."""
-    from scipy.signal import butter, lfilter
-
     from popup.noise import CORRELATION_S, noise_std
     from popup.problem import ReplayProblem
 
-    t, q = popup.synth.lab_trajectory(8.0, rate=200.0, seed=29)
-    rng = np.random.default_rng(3)
-    b, a = butter(2, 45.0 / 100.0)
-    imu = ["imu1_ax", "imu1_ay", "imu1_az", "imu2_ax", "imu2_ay", "imu2_az"]
-    true = {}
-
-    def coloured(tt):
-        out = {}
-        for c in imu:
-            x = 0.007 * lfilter(b, a, rng.normal(0.0, 1.0, len(tt) + 200))[200:]
-            true[c] = float(np.std(x))
-            out[c] = x
-        return out
-
-    truth = nominal.with_effect("payload_mass", delta_kg=0.4)
-    run = popup.synth.measured_run(truth, t, q, tmp_path, seed=29, noise={"tau": 0.05, "ee": 2e-4, "imu": 0.0}, disturbance=coloured)
+    run, _, imu, true = _coloured_payload_run(nominal, tmp_path)
     p0 = ReplayProblem(nominal, run, threads=0)
-    z = (p0.nominal_simulation() - p0.measured)
+    z = p0.nominal_simulation() - p0.measured
     alone = {c: noise_std(p0.time, z[:, p0.channels.index(c)], correlation_s=CORRELATION_S) for c in imu}
     assert min(alone[c] / true[c] for c in imu) < 0.5, alone
     for c in imu:
