@@ -18,9 +18,11 @@ What it holds (set up once, reused by every fit):
 * **Encoder** (encoder replay): the measured angles smoothed by
   :func:`popup.smoothing.smooth_encoder` (a quantised or noisy encoder interpolated as is
   makes q̈, and so the torques, noisy: the replay would sit above the noise floor).
-* **Noise floor** σ_c of each channel (:func:`popup.noise.noise_std` of the nominal
+* **Noise floor** σ_c of each channel (:func:`popup.noise.noise_stds` of the nominal
   model's residual: divided differences remove the smooth systematic part; strides up
-  to :data:`popup.noise.CORRELATION_S` find noise coloured by a sensor's low-pass).
+  to :data:`popup.noise.CORRELATION_S` find noise coloured by a sensor's low-pass, and a
+  channel whose misfit hides that colour takes its sensor kind's,
+  :data:`popup.results.SENSORS`).
 * **Encoder floor** (encoder replay, :attr:`ReplayProblem.encoder_floor`): the replay
   error that the encoder's own error causes in each channel, by a parametric bootstrap
   (the smoothed angles re-measured :data:`ENCODER_DRAWS` times as the encoder measures:
