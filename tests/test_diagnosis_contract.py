@@ -310,6 +310,39 @@ def test_isolated_spikes_are_named_where_the_error_is_left(nominal, friction_run
     json.dumps(js, allow_nan=False)
 
 
+@pytest.mark.parametrize("seed", [3, 17])
+def test_constant_sensor_offsets_are_named_with_their_values_where_the_error_is_left(nominal, tmp_path, seed):
+    """A constant offset on a channel (an IMU's bias, a torque sensor's zero, a mocap frame's
+    calibration) is no library effect: nothing is added, and the conclusion and the JSON
+    give each offset's value. Cases drawn per seed: 4 of the 12 channels, 4-10 σ, either sign."""
+    rng = np.random.default_rng(seed)
+    t, q = popup.synth.lab_trajectory(6.0, seed=seed)
+    group = {"tau": "tau", "ee_": "ee", "imu": "imu"}
+    chans = [str(c) for c in rng.choice(list(popup.problem.DEFAULT_CHANNELS), size=4, replace=False)]
+    bias = {c: float(rng.choice([-1.0, 1.0]) * rng.uniform(4.0, 10.0) * popup.synth.NOISE[group[c[:3]]]) for c in chans}
+    run = popup.synth.measured_run(nominal, t, q, tmp_path, seed=seed,
+                                   disturbance=lambda tt: {c: np.full(np.size(tt), b) for c, b in bias.items()})
+    prob = popup.ReplayProblem(nominal, run)
+    off = prob.offsets()
+    n = int(prob.used.sum())
+    for c in prob.channels:
+        # white noise: the mean of n samples scatters by σ/√n (5 of them: 6e-7 two-sided)
+        tol = 5.0 * prob.noise[c] / math.sqrt(n)
+        assert off[c]["offset"] == pytest.approx(bias.get(c, 0.0), abs=tol), (c, off[c], bias)
+        assert (off[c]["share"] > 0.95) if c in bias else (abs(off[c]["z_mean"]) < 5.0 / math.sqrt(n)), (c, off[c])
+    d = popup.diagnose(nominal, run, effects=["payload_mass"], problem=prob)
+    assert d.significant == [] and "constant offsets" in d.conclusion, d.conclusion
+    for c in chans:
+        assert f"{c} reads {off[c]['offset']:+.3g} {popup.results.UNITS[c]} off the model" in d.conclusion, d.conclusion
+    js = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1).to_dict()
+    for c in prob.channels:
+        assert js["channels"][c]["offset"] == pytest.approx(off[c]["offset"], rel=1e-6, abs=1e-12)
+    json.dumps(js, allow_nan=False)
+    # the clean run names none
+    clean = popup.synth.measured_run(nominal, t, q, tmp_path / "clean", seed=seed)
+    assert "constant offsets" not in popup.diagnose(nominal, clean, effects=["payload_mass"]).conclusion
+
+
 def test_held_out_samples_an_effect_does_not_act_on_neither_confirm_nor_refute_it():
     """A torque limit reached only in training blocks leaves the held-out residual exactly as
     it was: that is 'silent', not a refutation; any change there, or a failed run (NaN), is not."""

@@ -833,6 +833,28 @@ class ReplayProblem:
         return out
 
 
+    def offsets(self, z: Optional[np.ndarray] = None) -> Dict[str, Dict[str, float]]:
+        """The constant part of the residual ``z`` (n, C) in noise units (default: the model
+        as given), per channel with a finite one: ``offset`` = mean(y − ŷ) in the channel's
+        unit (what the measured channel reads above the model: a sensor bias, a calibration
+        offset), ``z_mean`` the same in noise units and ``share`` the part of the channel's
+        excess ``Σ z² − n`` it makes (``n·mean(z)²`` of it, 0..1). The spectrum of the
+        residual leaves the mean out (:attr:`~popup.Comparison.spectrum`); this is it."""
+        if z is None:
+            z = self.residuals(self.nominal_simulation())
+        out: Dict[str, Dict[str, float]] = {}
+        for j, c in enumerate(self.channels):
+            x = z[self.used, j]
+            x = x[np.isfinite(x)]
+            if x.size < 2:
+                continue
+            m = float(np.mean(x))
+            excess = float(np.sum(x * x)) - x.size
+            out[c] = {"offset": -m * float(self.sigma[j]), "z_mean": m,
+                      "share": float(min(max(x.size * m * m / excess, 0.0), 1.0)) if excess > 0 else 0.0}
+        return out
+
+
 class Cancelled(BaseException):
     """A candidate's work stopped because another thread was interrupted
     (:meth:`ReplayProblem.fork`). A ``BaseException``, like ``KeyboardInterrupt``: the

@@ -135,6 +135,7 @@ from .rules import (
     JOINT_TOP,
     MIN_EXPLAINED,
     NOISE_RECHECK,
+    OFFSET_SHARE,
     PLAY_READINGS,
     SCORE_THRESHOLD,
     SPIKE_SHARE,
@@ -164,6 +165,7 @@ __all__ = [
     "JOINT_TOP",
     "FLOOR_MULTIPLE",
     "NOISE_RECHECK",
+    "OFFSET_SHARE",
     "SPIKE_SHARE",
     "PLAY_READINGS",
 ]

@@ -7,7 +7,8 @@ import math
 from typing import Dict, List, Mapping, Optional
 
 from ..problem import SPIKE_SIGMA, ReplayProblem
-from .rules import AT_FLOOR, FLOOR_MULTIPLE, SPIKE_SHARE
+from ..results import UNITS
+from .rules import AT_FLOOR, FLOOR_MULTIPLE, OFFSET_SHARE, SPIKE_SHARE
 from .results import Diagnosis, History, fmt_params, step_at_floor
 
 
@@ -32,31 +33,41 @@ def round_conclusion(d: Diagnosis) -> str:
 
 
 def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
-    """Where the unexplained error sits: channels, time window, frequency band."""
+    """Where the unexplained error sits: channels, time window, frequency band, constant
+    offsets and isolated spikes."""
     per = d.channel_error if per is None else per
     worst = sorted(per.items(), key=lambda kv: -kv[1])[:3]
     txt = "worst channels " + ", ".join(f"{c} {v:.2g}× noise" for c, v in worst)
+    prob = d.problem
+    sp: Dict[str, Dict] = {}
+    off: Dict[str, Dict[str, float]] = {}
+    if prob is not None:
+        try:
+            z = prob.residuals(prob.nominal_simulation())
+            sp, off = prob.spikes(z), prob.offsets(z)
+        except Exception:  # noqa: BLE001 - a missing view must not hide the finding
+            pass
+    const = sorted(((c, v) for c, v in off.items() if v["share"] >= OFFSET_SHARE and per.get(c, 0.0) > FLOOR_MULTIPLE),
+                   key=lambda kv: -per.get(kv[0], 0.0))
     cmp = d.comparison
     try:
         w = cmp.windows.sort_values("rank").iloc[0]
         txt += f"; worst window t = {float(w['t_start']):.3g}–{float(w['t_end']):.3g} s ({100 * float(w['error_share']):.0f} % of the error)"
         c0 = worst[0][0]
-        sp = cmp.spectrum.loc[c0]
-        if str(sp["dominant_band"]):
-            txt += f"; {c0}'s residual mostly in {sp['dominant_band']} (peak {float(sp['peak_hz']):.3g} Hz)"
+        band = cmp.spectrum.loc[c0]
+        if str(band["dominant_band"]) and c0 not in dict(const):
+            txt += f"; {c0}'s residual mostly in {band['dominant_band']} (peak {float(band['peak_hz']):.3g} Hz)"
     except Exception:  # noqa: BLE001 - a missing view must not hide the finding
         pass
-    prob = d.problem
-    if prob is not None:
-        try:
-            sp = prob.spikes(prob.residuals(prob.nominal_simulation()))
-        except Exception:  # noqa: BLE001
-            sp = {}
-        big = sorted(((c, v) for c, v in sp.items() if v["share"] >= SPIKE_SHARE and per.get(c, 0.0) > FLOOR_MULTIPLE), key=lambda kv: -kv[1]["share"])
-        if big:
-            txt += "; isolated spikes (sensor glitches, or an effect sharper than a sample): " + ", ".join(
-                f"{c} {v['count']} sample(s) > {SPIKE_SIGMA:g}σ from their neighbours (first at t = {v['times'][0]:.4g} s), "
-                f"{100 * v['share']:.0f} % of its excess" for c, v in big[:3])
+    if const:
+        txt += ("; constant offsets (a sensor bias or a calibration offset, which no library effect is): " + ", ".join(
+            f"{c} reads {v['offset']:+.3g} {UNITS.get(c, '')} off the model ({-v['z_mean']:+.2g} noise σ, "
+            f"{100 * v['share']:.0f} % of its excess)" for c, v in const[:4]) + (f" and {len(const) - 4} more" if len(const) > 4 else ""))
+    big = sorted(((c, v) for c, v in sp.items() if v["share"] >= SPIKE_SHARE and per.get(c, 0.0) > FLOOR_MULTIPLE), key=lambda kv: -kv[1]["share"])
+    if big:
+        txt += "; isolated spikes (sensor glitches, or an effect sharper than a sample): " + ", ".join(
+            f"{c} {v['count']} sample(s) > {SPIKE_SIGMA:g}σ from their neighbours (first at t = {v['times'][0]:.4g} s), "
+            f"{100 * v['share']:.0f} % of its excess" for c, v in big[:3])
     return txt
 
 

@@ -477,7 +477,9 @@ class History:
         ``noise`` (σ per channel), ``channels`` (per channel: noise, noise multiple before
         and after, at the noise floor, the encoder floor (the replay error the encoder's own
         error causes, a multiple of the noise), the nominal residual's isolated spikes: count, first
-        times [s], share of the excess; :meth:`ReplayProblem.spikes`), ``suspects`` (first round, every effect ranked),
+        times [s], share of the excess; :meth:`ReplayProblem.spikes`; its constant part: ``offset``, what the
+        measured channel reads above the model in its unit, and ``offset_share`` of the excess;
+        :meth:`ReplayProblem.offsets`), ``suspects`` (first round, every effect ranked),
         ``history`` (each step's effects and error), ``rounds``, ``conclusion``, ``notes``
         (what the swap and base-law steps tried, the noise floors re-estimated), ``noise_initial`` (σ per channel
         as first estimated, before the loop re-estimated any), ``complete`` and, when a round failed,
@@ -486,12 +488,14 @@ class History:
         floor = self.at_floor
         enc = self.encoder_floor
         spikes: Dict[str, Dict[str, Any]] = {}
+        offsets: Dict[str, Dict[str, float]] = {}
         fp = self._floors_problem()
         if fp is not None:
             try:
-                spikes = fp.spikes()
+                z = fp.residuals(fp.nominal_simulation())
+                spikes, offsets = fp.spikes(z), fp.offsets(z)
             except Exception:  # noqa: BLE001 - the numbers still go out
-                spikes = {}
+                spikes, offsets = {}, {}
         out: Dict[str, Any] = {
             "run": self.run,
             "nominal_error": _num(self.steps[0].error),
@@ -508,6 +512,8 @@ class History:
                     "spikes": spikes.get(c, {}).get("count", 0),
                     "spike_times": spikes.get(c, {}).get("times", []),
                     "spike_share": _num(spikes.get(c, {}).get("share", 0.0)),
+                    "offset": _num(offsets.get(c, {}).get("offset")),
+                    "offset_share": _num(offsets.get(c, {}).get("share")),
                 }
                 for c in self.steps[0].channel_error
             },

@@ -46,6 +46,13 @@ SPIKE_SHARE = 0.5
 replay at the floor can have one: a friction reversal a sample early is a one-sample step)."""
 
 
+OFFSET_SHARE = 0.5
+"""Share of a channel's excess above which the unexplained error names the residual's
+constant part (:meth:`ReplayProblem.offsets`: a sensor bias or a calibration offset; no
+effect of the library is a constant on one channel), for a channel above
+:data:`FLOOR_MULTIPLE` × its noise."""
+
+
 FLOOR_MULTIPLE = 1.2
 """After an effect was added, :func:`improve` stops when the systematic error is at most
 :data:`AT_FLOOR` and every channel is within this multiple of its noise (a systematic part of
