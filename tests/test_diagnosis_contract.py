@@ -341,6 +341,29 @@ def test_constant_sensor_offsets_are_named_with_their_values_where_the_error_is_
     # the clean run names none
     clean = popup.synth.measured_run(nominal, t, q, tmp_path / "clean", seed=seed)
     assert "constant offsets" not in popup.diagnose(nominal, clean, effects=["payload_mass"]).conclusion
+    # fitted with every model (offsets=True, --offsets): the run is at its floor, the offsets given
+    h = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1, offsets=True)
+    assert h.effects == [] and h.steps[0].error <= dg.AT_FLOOR and "a constant offset was fitted" in h.conclusion, h.conclusion
+    js = h.to_dict()
+    for c in prob.channels:
+        assert js["channels"][c]["offset"] == pytest.approx(bias.get(c, 0.0), abs=5.0 * prob.noise[c] / math.sqrt(n)), c
+
+
+def test_friction_under_torque_sensor_offsets_is_fitted_right_with_the_offsets_fitted(nominal, tmp_path):
+    """Offsets on the torques break Coulomb friction's symmetry: fitted beside them, friction
+    lands on its truth and the error falls to the noise (default: the offsets stay in the
+    error and bias the fit; the conclusion names them)."""
+    t, q = popup.synth.lab_trajectory(6.0, seed=3)
+    bias = {"tau1": -0.34, "tau2": -0.25, "tau3": 0.23, "imu1_ay": 0.094}
+    run = popup.synth.measured_run(nominal.with_effect("joint_friction", **FRICTION), t, q, tmp_path, seed=3,
+                                   disturbance=lambda tt: {c: np.full(np.size(tt), b) for c, b in bias.items()})
+    h = popup.improve(nominal, run, effects=["payload_mass", "joint_friction"], max_rounds=2, offsets=True)
+    assert h.effects == ["joint_friction"] and h.steps[-1].error <= 0.1 * h.steps[0].error, h.conclusion
+    fit = h.steps[-1].params["joint_friction"]
+    assert np.allclose(fit["tau_c"], FRICTION["tau_c"], rtol=0.05) and np.allclose(fit["b"], FRICTION["b"], atol=0.05), fit
+    js = h.to_dict()
+    for c, b in bias.items():
+        assert js["channels"][c]["offset"] == pytest.approx(b, abs=5.0 * h.noise[c] / math.sqrt(len(run.time))), c
 
 
 def test_held_out_samples_an_effect_does_not_act_on_neither_confirm_nor_refute_it():

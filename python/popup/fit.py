@@ -247,6 +247,7 @@ def fit_params(
     max_iter: int = 40,
     seeds: bool = True,
     starts: int = 3,
+    offsets: bool = False,
 ) -> FitResult:
     """Fit the named effect parameters of ``model`` to the measured ``run`` (free-run
     replay of its encoders, or of its references in closed loop).
@@ -272,6 +273,8 @@ def fit_params(
     starts : the best ``starts`` starts are each fitted; the best fit is kept and
         :attr:`FitResult.warnings` says when another start ended elsewhere or the fit sits
         at a bound.
+    offsets : also fit a constant offset per channel (a sensor bias), profiled out of
+        every residual (:class:`~popup.problem.ReplayProblem`).
     """
     t_start = time.perf_counter()
     channels, sample_rate = _check_args(params, bounds, scale, x0, grid, channels, sample_rate, threads, max_iter, starts)
@@ -303,7 +306,7 @@ def fit_params(
             raise InputError(f"input scale: {key} = {s} must be finite and > 0")
         sc.append(s)
     x_start = np.array(start)
-    prob = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads)
+    prob = ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads, offsets=offsets)
     chans = prob.channels
     if initial_q is not None or initial_v is not None:
         nv = len(model.joint_names)

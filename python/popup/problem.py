@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import math
 import threading
+import warnings
 from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -292,6 +293,11 @@ class ReplayProblem:
     sample_rate : simulation output rate [Hz] (default: :func:`output_rate`).
     threads : rollout threads (0 = every core).
     smooth : smooth the encoder angles (encoder replay; default True).
+    offsets : fit a constant offset per channel with every model (a sensor bias or a
+        calibration offset the lab has not removed): every residual has its mean over the
+        samples used taken out (:meth:`residuals`), so fits, errors and ranking see the
+        rest; :meth:`offsets` gives the values. Default False: a constant is part of the
+        error (a payload's torque is partly one).
 
     Attributes
     ----------
@@ -323,6 +329,7 @@ class ReplayProblem:
     t0: float
     duration: float
     sigma: np.ndarray
+    fit_offsets: bool
     _count: List[int]
     _nominal: Optional[Tuple[np.ndarray, Any]]
     _cancel: Optional[threading.Event]
@@ -341,6 +348,7 @@ class ReplayProblem:
         sample_rate: Optional[float] = None,
         threads: int = 0,
         smooth: bool = True,
+        offsets: bool = False,
         _parent: Optional["ReplayProblem"] = None,
     ) -> None:
         if not isinstance(run, MeasuredRun):
@@ -358,6 +366,7 @@ class ReplayProblem:
         if run.replay not in ("encoder", "reference"):
             raise MeasuredRunError(f"{self.where}: unknown replay mode {run.replay!r}; expected \"encoder\" or \"reference\"")
         self.closed = run.replay == "reference"
+        self.fit_offsets = bool(offsets) if _parent is None else _parent.fit_offsets
         if _parent is not None:
             p = _parent
             self.notes = list(p.notes)
@@ -771,8 +780,15 @@ class ReplayProblem:
     # ------------------------------------------------------------------ residuals and errors
     def residuals(self, sims: np.ndarray) -> np.ndarray:
         """Residuals in noise units ``(ŷ − y)/σ``, same shape as ``sims``; NaN where a side
-        is missing; a failed run is NaN everywhere."""
-        return (np.asarray(sims) - self.measured) / self.sigma
+        is missing; a failed run is NaN everywhere. With ``offsets`` each channel's mean
+        over the samples used is taken out."""
+        z = (np.asarray(sims) - self.measured) / self.sigma
+        if self.fit_offsets:
+            # the constant per channel profiled out (its least-squares value: the mean)
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # a failed run: all NaN, stays NaN
+                z = z - np.nanmean(z[..., self.used, :], axis=-2, keepdims=True)
+        return z
 
     def channel_stats(self, z: np.ndarray, mask: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per channel over ``mask`` (default :attr:`used`: every sample but a start-up
@@ -835,13 +851,13 @@ class ReplayProblem:
 
     def offsets(self, z: Optional[np.ndarray] = None) -> Dict[str, Dict[str, float]]:
         """The constant part of the residual ``z`` (n, C) in noise units (default: the model
-        as given), per channel with a finite one: ``offset`` = mean(y − ŷ) in the channel's
+        as given, its offsets not taken out whatever ``offsets``), per channel with a finite one: ``offset`` = mean(y − ŷ) in the channel's
         unit (what the measured channel reads above the model: a sensor bias, a calibration
         offset), ``z_mean`` the same in noise units and ``share`` the part of the channel's
         excess ``Σ z² − n`` it makes (``n·mean(z)²`` of it, 0..1). The spectrum of the
         residual leaves the mean out (:attr:`~popup.Comparison.spectrum`); this is it."""
         if z is None:
-            z = self.residuals(self.nominal_simulation())
+            z = (self.nominal_simulation() - self.measured) / self.sigma
         out: Dict[str, Dict[str, float]] = {}
         for j, c in enumerate(self.channels):
             x = z[self.used, j]

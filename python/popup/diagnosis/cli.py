@@ -96,6 +96,9 @@ def cli_main(argv: Sequence[str]) -> int:
     ap.add_argument("--threads", type=int, default=0, help="cores to use: candidates fitted at once, each with a share of them as rollout threads; the result does not depend on it (0 = all cores)")
     ap.add_argument("--rank-at-floor", action="store_true",
                     help="fit and rank every effect even when the model is at its floor (noise and encoder); by default they are not tried")
+    ap.add_argument("--offsets", action="store_true",
+                    help="fit a constant offset per channel with every model (sensor biases, calibration offsets the run still has); "
+                         "by default a constant is part of the error and the conclusion names large ones")
     ap.add_argument("--no-progress", action="store_true", help="no progress line on stderr (it is off anyway with --json or when stderr is not a terminal)")
     ap.add_argument("--time-limit", type=float, metavar="SECONDS",
                     help="stop after this many seconds and print the rounds finished (as on Ctrl-C or SIGTERM), exit 1")
@@ -112,7 +115,7 @@ def cli_main(argv: Sequence[str]) -> int:
         channels = [c.strip() for c in a.channels.split(",")] if a.channels else None
         with _interrupts(a.time_limit):
             h = improve(model, run, max_rounds=a.max_rounds, effects=effects, channels=channels, threads=a.threads, progress=bar,
-                        rank_at_floor=a.rank_at_floor, stop_on_interrupt=True)
+                        rank_at_floor=a.rank_at_floor, stop_on_interrupt=True, offsets=a.offsets)
     except (PopupError, FileNotFoundError, NotADirectoryError) as e:
         if bar is not None:
             bar.close()

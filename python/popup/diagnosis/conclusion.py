@@ -9,7 +9,7 @@ from typing import Dict, List, Mapping, Optional
 from ..problem import SPIKE_SIGMA, ReplayProblem
 from ..results import UNITS
 from .rules import AT_FLOOR, FLOOR_MULTIPLE, OFFSET_SHARE, SPIKE_SHARE
-from .results import Diagnosis, History, fmt_params, step_at_floor
+from .results import Diagnosis, History, final_problem, fmt_params, step_at_floor
 
 
 def round_conclusion(d: Diagnosis) -> str:
@@ -44,7 +44,7 @@ def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
     if prob is not None:
         try:
             z = prob.residuals(prob.nominal_simulation())
-            sp, off = prob.spikes(z), prob.offsets(z)
+            sp, off = prob.spikes(z), ({} if prob.fit_offsets else prob.offsets(z))
         except Exception:  # noqa: BLE001 - a missing view must not hide the finding
             pass
     const = sorted(((c, v) for c, v in off.items() if v["share"] >= OFFSET_SHARE and per.get(c, 0.0) > FLOOR_MULTIPLE),
@@ -60,7 +60,7 @@ def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
     except Exception:  # noqa: BLE001 - a missing view must not hide the finding
         pass
     if const:
-        txt += ("; constant offsets (a sensor bias or a calibration offset, which no library effect is): " + ", ".join(
+        txt += ("; constant offsets (a sensor bias or a calibration offset, which no library effect is: --offsets fits them): " + ", ".join(
             f"{c} reads {v['offset']:+.3g} {UNITS.get(c, '')} off the model ({-v['z_mean']:+.2g} noise σ, "
             f"{100 * v['share']:.0f} % of its excess)" for c, v in const[:4]) + (f" and {len(const) - 4} more" if len(const) > 4 else ""))
     big = sorted(((c, v) for c, v in sp.items() if v["share"] >= SPIKE_SHARE and per.get(c, 0.0) > FLOOR_MULTIPLE), key=lambda kv: -kv[1]["share"])
@@ -140,6 +140,14 @@ def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) 
     untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses if not d.model_at_floor for s in d.untested})
     if untested:
         parts.append("the ranking is incomplete: " + "; ".join(untested))
+    if prob0 is not None and prob0.fit_offsets:
+        try:
+            off = final_problem(prob0, last).offsets()
+        except Exception:  # noqa: BLE001 - the words still go out
+            off = {}
+        big = sorted(off.items(), key=lambda kv: -abs(kv[1]["z_mean"]))[:4]
+        parts.append("a constant offset was fitted per channel with every model (a sensor bias or a calibration offset; the largest: "
+                     + ", ".join(f"{c} {v['offset']:+.3g} {UNITS.get(c, '')} ({-v['z_mean']:+.2g} noise σ)" for c, v in big) + ")")
     floors_moved = {c: h.noise[c] / v for c, v in h.noise_initial.items() if v > 0 and c in h.noise and h.noise[c] != v}
     if floors_moved:
         txt = ", ".join(f"{c} {r:.2g}×" for c, r in sorted(floors_moved.items(), key=lambda kv: -abs(math.log(kv[1]))))

@@ -38,6 +38,7 @@ def improve(
     progress: Optional[Progress] = None,
     rank_at_floor: bool = False,
     stop_on_interrupt: bool = False,
+    offsets: bool = False,
 ) -> History:
     """The loop: diagnose, add the top significant effect, refit every added effect
     jointly, diagnose again; until no effect is significant or ``max_rounds``.
@@ -47,14 +48,16 @@ def improve(
     ``rank_at_floor``: as :func:`diagnose`, for a model at its floor from the start.
     ``stop_on_interrupt``: a ``KeyboardInterrupt`` after the set-up (Ctrl-C; ``popup
     diagnose`` also raises one on SIGTERM and at its ``--time-limit``) ends the loop like a
-    failed round, returning the rounds finished, instead of propagating."""
+    failed round, returning the rounds finished, instead of propagating.
+    ``offsets``: fit a constant offset per channel with every model, a sensor bias or a
+    calibration offset the run still has (:class:`ReplayProblem`); the conclusion gives them."""
     t_start = time.perf_counter()
     for n in effects or []:
         fx.normalize(n, {})  # bad input is refused before any work
     if int(max_rounds) < 0:
         raise InputError(f"input max_rounds: {max_rounds} must be ≥ 0")
     est.check_max_iter(max_iter)
-    prob = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads))
+    prob = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads, offsets=offsets))
     steps = [_step(prob, [], {}, 0)]
     noise0 = prob.noise
     diags: List[Diagnosis] = []

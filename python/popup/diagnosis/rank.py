@@ -165,6 +165,7 @@ def diagnose(
     starts: Optional[Mapping[str, Mapping[str, Sequence[float]]]] = None,
     screen: int = 0,
     joint: bool = False,
+    offsets: bool = False,
 ) -> Diagnosis:
     """Rank every effect of the library (or ``effects``) by how much of the model's
     systematic error on ``run`` it explains, each fitted, validated on held-out samples,
@@ -192,6 +193,8 @@ def diagnose(
     with those effects held first: for a candidate whose error an earlier effect's value
     took, which a fit with that value held does not see (:func:`improve`'s base-law step
     over the candidates never significant before).
+    ``offsets``: fit a constant offset per channel with every model (a sensor bias; see
+    :class:`ReplayProblem`), when no ``problem`` is given.
     """
     t_start = time.perf_counter()
     est.check_max_iter(max_iter)
@@ -200,7 +203,7 @@ def diagnose(
         fx.normalize(n, {})
     given = problem is not None
     if problem is None:
-        problem = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads))
+        problem = fit_unseen_motion(ReplayProblem(model, run, channels=channels, sample_rate=sample_rate, threads=threads, offsets=offsets))
     elif problem.model is not model:
         raise InputError("diagnose: problem= must be a ReplayProblem of this model (ReplayProblem.with_model)")
     prob = problem

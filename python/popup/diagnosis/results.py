@@ -27,6 +27,11 @@ def _pd() -> Any:
     return pd
 
 
+def final_problem(prob: ReplayProblem, step: "HistoryStep") -> ReplayProblem:
+    """``prob`` (in its noise floors) with the model of ``step``."""
+    return prob if step.model is None or step.model is prob.model else prob.with_model(step.model)
+
+
 def _num(x: Any) -> Optional[float]:
     try:
         x = float(x)
@@ -477,8 +482,9 @@ class History:
         ``noise`` (σ per channel), ``channels`` (per channel: noise, noise multiple before
         and after, at the noise floor, the encoder floor (the replay error the encoder's own
         error causes, a multiple of the noise), the nominal residual's isolated spikes: count, first
-        times [s], share of the excess; :meth:`ReplayProblem.spikes`; its constant part: ``offset``, what the
-        measured channel reads above the model in its unit, and ``offset_share`` of the excess;
+        times [s], share of the excess; :meth:`ReplayProblem.spikes`; the last model's constant part:
+        ``offset``, what the measured channel reads above that model in its unit (with ``offsets``
+        the fitted offset), and ``offset_share`` of that model's excess before it is taken out;
         :meth:`ReplayProblem.offsets`), ``suspects`` (first round, every effect ranked),
         ``history`` (each step's effects and error), ``rounds``, ``conclusion``, ``notes``
         (what the swap and base-law steps tried, the noise floors re-estimated), ``noise_initial`` (σ per channel
@@ -493,7 +499,7 @@ class History:
         if fp is not None:
             try:
                 z = fp.residuals(fp.nominal_simulation())
-                spikes, offsets = fp.spikes(z), fp.offsets(z)
+                spikes, offsets = fp.spikes(z), final_problem(fp, self.steps[-1]).offsets()
             except Exception:  # noqa: BLE001 - the numbers still go out
                 spikes, offsets = {}, {}
         out: Dict[str, Any] = {
