@@ -334,30 +334,56 @@ def test_constant_sensor_offsets_are_named_with_their_values_where_the_error_is_
     assert d.significant == [] and "constant offsets" in d.conclusion, d.conclusion
     for c in chans:
         assert f"{c} reads {off[c]['offset']:+.3g} {popup.results.UNITS[c]} off the model" in d.conclusion, d.conclusion
-    js = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1).to_dict()
+    h0 = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1, offsets=False)
+    assert "constant offsets" in h0.conclusion and "fitted" not in h0.conclusion, h0.conclusion
+    js = h0.to_dict()
     for c in prob.channels:
         assert js["channels"][c]["offset"] == pytest.approx(off[c]["offset"], rel=1e-6, abs=1e-12)
     json.dumps(js, allow_nan=False)
-    # the clean run names none
+    assert dgl.offsets_left(h0).startswith("100 % of its excess")
+    # the clean run names none, and its loop is not run again
     clean = popup.synth.measured_run(nominal, t, q, tmp_path / "clean", seed=seed)
     assert "constant offsets" not in popup.diagnose(nominal, clean, effects=["payload_mass"]).conclusion
-    # fitted with every model (offsets=True, --offsets): the run is at its floor, the offsets given
-    h = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1, offsets=True)
-    assert h.effects == [] and h.steps[0].error <= dg.AT_FLOOR and "a constant offset was fitted" in h.conclusion, h.conclusion
-    js = h.to_dict()
-    for c in prob.channels:
-        assert js["channels"][c]["offset"] == pytest.approx(bias.get(c, 0.0), abs=5.0 * prob.noise[c] / math.sqrt(n)), c
+    hc = popup.improve(nominal, clean, effects=["payload_mass"], max_rounds=1)
+    assert dgl.offsets_left(hc) == "" and not hc.problem.fit_offsets and "offset" not in hc.conclusion, hc.conclusion
+    # fitted with every model (offsets=True, --offsets; and by default, as what the loop left
+    # is all offsets): the run is at its floor, the offsets given
+    for how in (True, None):
+        h = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1, offsets=how)
+        assert h.problem.fit_offsets and h.effects == [] and h.steps[0].error <= dg.AT_FLOOR, h.conclusion
+        assert "a constant offset was fitted" in h.conclusion and ("fitted because the pass" in h.conclusion) == (how is None), h.conclusion
+        js = h.to_dict()
+        for c in prob.channels:
+            assert js["channels"][c]["offset"] == pytest.approx(bias.get(c, 0.0), abs=5.0 * prob.noise[c] / math.sqrt(n)), c
+
+
+def test_the_cli_fits_offsets_when_asked_never_when_told_not_to_and_refuses_both(nominal, tmp_path, capsys):
+    t, q = popup.synth.lab_trajectory(5.0, seed=8)
+    run = popup.synth.measured_run(nominal, t, q, tmp_path, seed=8, disturbance=lambda tt: {"imu2_az": np.full(np.size(tt), 0.15)})
+    out = {}
+    for flag in ("--offsets", "--no-offsets", None):
+        rc = dg.cli_main([str(run.source), "--json", "--effects", "payload_mass"] + ([flag] if flag else []))
+        assert rc == 0
+        out[flag] = json.loads(capsys.readouterr().out)
+    assert "a constant offset was fitted" in out["--offsets"]["conclusion"] and "fitted because" not in out["--offsets"]["conclusion"]
+    assert "imu2_az reads +0.15 m/s² off the model" in out["--no-offsets"]["conclusion"], out["--no-offsets"]["conclusion"]
+    assert "fitted because the pass with constant offsets in the error added nothing" in out[None]["conclusion"]
+    assert out[None]["channels"]["imu2_az"]["offset"] == pytest.approx(0.15, abs=0.005)
+    with pytest.raises(SystemExit):
+        dg.cli_main([str(run.source), "--offsets", "--no-offsets"])
+    assert "not allowed with" in capsys.readouterr().err
 
 
 def test_friction_under_torque_sensor_offsets_is_fitted_right_with_the_offsets_fitted(nominal, tmp_path):
     """Offsets on the torques break Coulomb friction's symmetry: fitted beside them, friction
-    lands on its truth and the error falls to the noise (default: the offsets stay in the
-    error and bias the fit; the conclusion names them)."""
+    lands on its truth and the error falls to the noise (with the offsets in the error the
+    fit is biased and leaves them: the loop runs again with them fitted)."""
     t, q = popup.synth.lab_trajectory(6.0, seed=3)
     bias = {"tau1": -0.34, "tau2": -0.25, "tau3": 0.23, "imu1_ay": 0.094}
     run = popup.synth.measured_run(nominal.with_effect("joint_friction", **FRICTION), t, q, tmp_path, seed=3,
                                    disturbance=lambda tt: {c: np.full(np.size(tt), b) for c, b in bias.items()})
-    h = popup.improve(nominal, run, effects=["payload_mass", "joint_friction"], max_rounds=2, offsets=True)
+    h = popup.improve(nominal, run, effects=["payload_mass", "joint_friction"], max_rounds=2)
+    assert h.problem.fit_offsets and "fitted because the pass with constant offsets in the error added joint_friction" in h.conclusion
     assert h.effects == ["joint_friction"] and h.steps[-1].error <= 0.1 * h.steps[0].error, h.conclusion
     fit = h.steps[-1].params["joint_friction"]
     assert np.allclose(fit["tau_c"], FRICTION["tau_c"], rtol=0.05) and np.allclose(fit["b"], FRICTION["b"], atol=0.05), fit

@@ -136,6 +136,7 @@ from .rules import (
     MIN_EXPLAINED,
     NOISE_RECHECK,
     OFFSET_SHARE,
+    OFFSET_Z,
     PLAY_READINGS,
     SCORE_THRESHOLD,
     SPIKE_SHARE,
@@ -166,6 +167,7 @@ __all__ = [
     "FLOOR_MULTIPLE",
     "NOISE_RECHECK",
     "OFFSET_SHARE",
+    "OFFSET_Z",
     "SPIKE_SHARE",
     "PLAY_READINGS",
 ]

@@ -96,9 +96,12 @@ def cli_main(argv: Sequence[str]) -> int:
     ap.add_argument("--threads", type=int, default=0, help="cores to use: candidates fitted at once, each with a share of them as rollout threads; the result does not depend on it (0 = all cores)")
     ap.add_argument("--rank-at-floor", action="store_true",
                     help="fit and rank every effect even when the model is at its floor (noise and encoder); by default they are not tried")
-    ap.add_argument("--offsets", action="store_true",
-                    help="fit a constant offset per channel with every model (sensor biases, calibration offsets the run still has); "
-                         "by default a constant is part of the error and the conclusion names large ones")
+    off = ap.add_mutually_exclusive_group()
+    off.add_argument("--offsets", dest="offsets", action="store_const", const=True, default=None,
+                     help="fit a constant offset per channel with every model (sensor biases, calibration offsets the run still has); "
+                          "default: only when what the loop leaves is mostly constant offsets (the run is then diagnosed again)")
+    off.add_argument("--no-offsets", dest="offsets", action="store_const", const=False,
+                     help="never fit constant offsets (they stay in the error; the conclusion names large ones)")
     ap.add_argument("--no-progress", action="store_true", help="no progress line on stderr (it is off anyway with --json or when stderr is not a terminal)")
     ap.add_argument("--time-limit", type=float, metavar="SECONDS",
                     help="stop after this many seconds and print the rounds finished (as on Ctrl-C or SIGTERM), exit 1")

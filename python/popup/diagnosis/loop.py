@@ -15,8 +15,10 @@ from ..exceptions import InputError, StepTooLargeError
 from ..io import MeasuredRun
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
-from .rules import ENCODER_NOTE, JOINT_TOP, MIN_ITER, NOISE_RECHECK, Progress, SCORE_THRESHOLD, STEP_HALVINGS, model_at_floor
-from .results import Diagnosis, History, HistoryStep, step_at_floor
+from ..results import UNITS
+from .rules import (AT_FLOOR, ENCODER_NOTE, JOINT_TOP, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, Progress, SCORE_THRESHOLD,
+                    STEP_HALVINGS, model_at_floor)
+from .results import Diagnosis, History, HistoryStep, final_problem, step_at_floor
 from .candidate import left_out, unresolved_play
 from .conclusion import conclude
 from .rank import diagnose
@@ -38,7 +40,7 @@ def improve(
     progress: Optional[Progress] = None,
     rank_at_floor: bool = False,
     stop_on_interrupt: bool = False,
-    offsets: bool = False,
+    offsets: Optional[bool] = None,
 ) -> History:
     """The loop: diagnose, add the top significant effect, refit every added effect
     jointly, diagnose again; until no effect is significant or ``max_rounds``.
@@ -50,7 +52,80 @@ def improve(
     diagnose`` also raises one on SIGTERM and at its ``--time-limit``) ends the loop like a
     failed round, returning the rounds finished, instead of propagating.
     ``offsets``: fit a constant offset per channel with every model, a sensor bias or a
-    calibration offset the run still has (:class:`ReplayProblem`); the conclusion gives them."""
+    calibration offset the run still has (:class:`ReplayProblem`; True), or not (False).
+    Default (None): not, unless what the loop leaves is mostly constant offsets
+    (:func:`offsets_left`): no library effect is a constant on one channel, so the run is
+    then diagnosed again with them fitted and that history returned (its conclusion says
+    so; if that pass does not complete, the first is returned with a note)."""
+    kw: Dict[str, Any] = dict(max_rounds=max_rounds, effects=effects, channels=channels, sample_rate=sample_rate, threads=threads,
+                              max_iter=max_iter, progress=progress, rank_at_floor=rank_at_floor, stop_on_interrupt=stop_on_interrupt)
+    h = _improve(model, run, offsets=bool(offsets), **kw)
+    if offsets is not None or not h.complete:
+        return h
+    why = offsets_left(h)
+    if not why:
+        return h
+    first = (f"the pass with constant offsets in the error {'added ' + ', '.join(h.effects) if h.effects else 'added nothing'} and left "
+             f"{h.steps[-1].error:.3g} noise units, mostly constant offsets ({why})")
+    try:
+        h2 = _improve(model, run, offsets=True, **kw)
+        err = h2.error
+    except Exception as e:  # noqa: BLE001 - the first pass is complete: it is returned
+        err = f"{type(e).__name__}: {e}"
+    if err or not h2.complete:
+        h.notes.append(f"{first}; the pass with a constant offset fitted per channel did not complete ({err}): this is the first")
+        return h
+    h2.notes.insert(0, f"{first}: diagnosed again with a constant offset fitted per channel (offsets=True, --offsets)")
+    h2.conclusion = h2.conclusion[:-1] + f"; fitted because {first}."
+    h2.seconds += h.seconds
+    return h2
+
+
+def offsets_left(h: History) -> str:
+    """Why the last model of ``h`` leaves mostly constant offsets (empty if it does not): its
+    residual's constant parts (:meth:`ReplayProblem.offsets`) make at least
+    :data:`OFFSET_SHARE` of the excess over every channel, at least one of them significant
+    (:data:`OFFSET_Z` standard errors), and the model is above its floor."""
+    last = h.steps[-1]
+    prob = h.problem
+    if prob is None or prob.fit_offsets or last.error <= AT_FLOOR or step_at_floor(last, prob):
+        return ""
+    fp = final_problem(prob, last)
+    z = (fp.nominal_simulation() - fp.measured) / fp.sigma
+    z = z[fp.used]
+    const, excess, big = 0.0, 0.0, []
+    for j, c in enumerate(fp.channels):
+        x = z[:, j]
+        x = x[np.isfinite(x)]
+        if x.size < 2:
+            continue
+        m = float(np.mean(x))
+        const += x.size * m * m
+        excess += max(float(np.sum(x * x)) - x.size, 0.0)
+        if abs(m) * math.sqrt(x.size) >= OFFSET_Z:
+            big.append((c, m * fp.sigma[j] * -1.0, x.size * m * m))
+    if not big or excess <= 0 or const < OFFSET_SHARE * excess:
+        return ""
+    big.sort(key=lambda b: -b[2])
+    return (f"{100 * min(const / excess, 1.0):.0f} % of its excess; " + ", ".join(f"{c} {v:+.3g} {UNITS.get(c, '')}" for c, v, _ in big[:4])
+            + (f" and {len(big) - 4} more" if len(big) > 4 else ""))
+
+
+def _improve(
+    model: "Model",
+    run: MeasuredRun,
+    *,
+    max_rounds: int,
+    effects: Optional[Sequence[str]],
+    channels: Optional[Sequence[str]],
+    sample_rate: Optional[float],
+    threads: int,
+    max_iter: int,
+    progress: Optional[Progress],
+    rank_at_floor: bool,
+    stop_on_interrupt: bool,
+    offsets: bool,
+) -> History:
     t_start = time.perf_counter()
     for n in effects or []:
         fx.normalize(n, {})  # bad input is refused before any work

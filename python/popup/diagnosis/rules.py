@@ -53,6 +53,11 @@ effect of the library is a constant on one channel), for a channel above
 :data:`FLOOR_MULTIPLE` × its noise."""
 
 
+OFFSET_Z = 5.0
+"""Standard errors (σ/√n) a channel's constant offset must reach to count as one in
+:func:`~popup.diagnosis.loop.offsets_left` (white noise: two-sided 6e-7 per channel)."""
+
+
 FLOOR_MULTIPLE = 1.2
 """After an effect was added, :func:`improve` stops when the systematic error is at most
 :data:`AT_FLOOR` and every channel is within this multiple of its noise (a systematic part of
