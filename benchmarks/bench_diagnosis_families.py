@@ -389,6 +389,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--duration", type=float, default=None, help="every run this long [s] (default: drawn, 10-14 s)")
     ap.add_argument("--rates", default=None, help="sample rates [Hz] cycled over the runs instead of 200/500/1000 (comma-separated, "
                     f"each dividing 1 kHz; e.g. {','.join(f'{r:g}' for r in F.OTHER_RATES)})")
+    ap.add_argument("--biases", action="store_true", help="every run also gets sensor biases (families.draw_biases: IMU 0.03-0.2 m/s², "
+                    "torque 0.01-0.08 N·m, mocap 0.2-1 mm; the other draws unchanged)")
     ap.add_argument("--diagnose-args", default="", help="extra arguments for popup diagnose (one string, split on spaces)")
     ap.add_argument("--pool", nargs="+", metavar="DIR", help="only the tables, over every result cached in these --out folders "
                     "(re-classified with this script; e.g. several seeds pooled)")
@@ -411,6 +413,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             ov["rates"] = F.check_rates([x for x in a.rates.split(",") if x.strip()])
         except ValueError as e:
             ap.error(f"--rates: {e}")
+    if a.biases:
+        ov["biases"] = True
     if a.duration is not None:
         if not a.duration >= 2.0:
             ap.error(f"--duration: {a.duration} s; expected at least 2 s")

@@ -431,6 +431,7 @@ class RunSpec:
     encoder_bits: int = 14
     channels: str = "full"
     dropouts: bool = False
+    biases: Dict[str, float] = field(default_factory=dict)  # a constant per channel (sensor biases; BIASES)
     effect_sigma: Dict[str, float] = field(default_factory=dict)  # filled by make_run
     near_target_sigma: Optional[float] = None  # filled by calibrate_near
 
@@ -1138,7 +1139,7 @@ def measure(clean: Mapping[str, np.ndarray], spec: RunSpec, rng: np.random.Gener
     low-pass at ``noise_lowpass_hz`` when set), quantised encoders, the channel set
     (``full``, ``no_mocap``, ``no_torque``, ``pressure_noisy`` = full + p1 p2 with 50 Pa
     noise), NaN dropouts (mocap occlusion bursts of 20-200 ms, single IMU and torque
-    packets lost)."""
+    packets lost), and each channel's constant ``biases``."""
     t = np.asarray(clean["t"], dtype=float)
     n = len(t)
     out: Dict[str, np.ndarray] = {"t": t}
@@ -1153,7 +1154,7 @@ def measure(clean: Mapping[str, np.ndarray], spec: RunSpec, rng: np.random.Gener
             e = rng.normal(0.0, sd, n)
             if spec.noise_lowpass_hz > 0 and g in ("imu", "tau"):
                 e = _lowpassed(e, spec.noise_lowpass_hz, spec.rate, sd)
-            out[c] = np.asarray(clean[c], dtype=float) + e
+            out[c] = np.asarray(clean[c], dtype=float) + e + spec.biases.get(c, 0.0)
     if spec.channels == "pressure_noisy":
         for c in ("p1", "p2"):
             out[c] = np.asarray(clean[c], dtype=float) + rng.normal(0.0, PRESSURE_NOISE_PA, n)
@@ -1456,8 +1457,25 @@ def check_rates(rates: Sequence[float]) -> List[float]:
     return out
 
 
+def draw_biases(rng: np.random.Generator) -> Dict[str, float]:
+    """A lab's sensor biases, as uncalibrated sensors have them: each torque, end-effector
+    and IMU channel a constant of either sign and a magnitude uniform in :data:`BIASES`
+    (its group's range: IMU 0.03-0.2 m/s², torque 0.01-0.08 N·m, mocap 0.2-1 mm)."""
+    out: Dict[str, float] = {}
+    for c in MEAS_ORDER:
+        g = "tau" if c.startswith("tau") else "ee" if c.startswith("ee_") else "imu" if c.startswith("imu") else ""
+        if g:
+            lo, hi = BIASES[g]
+            out[c] = _r(float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi)), 6)
+    return out
+
+
+#: Sensor-bias ranges per channel group [channel unit] (:func:`draw_biases`, ``--biases``).
+BIASES: Dict[str, Tuple[float, float]] = {"imu": (0.03, 0.2), "tau": (0.01, 0.08), "ee": (2e-4, 1e-3)}
+
+
 def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[Sequence[str]] = None, rates: Optional[Sequence[float]] = None,
-                 **overrides: Any) -> List[RunSpec]:
+                 biases: bool = False, **overrides: Any) -> List[RunSpec]:
     """The ``n`` run specs of a family: ``kind`` is an effect name (that effect alone,
     levels alternating near/above), ``"pairs"`` (two effects, cycling :data:`PAIRS`),
     ``"nominal"`` (nothing hidden) or ``"disturbance"`` (a periodic disturbance outside
@@ -1470,7 +1488,8 @@ def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[
     1 kHz, popup's replay rate), the other draws unchanged. The cycles start at a phase of
     their own per family, so that even ``n = 1`` spreads rates, channel sets and levels
     over the families. ``overrides`` set any :class:`RunSpec` field of every run after the
-    draw (e.g. ``duration=3.0`` for quick tests)."""
+    draw (e.g. ``duration=3.0`` for quick tests). ``biases``: every run also gets sensor
+    biases (:func:`draw_biases`, from a stream of their own: the other draws unchanged)."""
     if engine not in ENGINES:
         raise ValueError(f"engine {engine!r}: expected one of {ENGINES}")
     if kind not in FAMILY_KINDS:
@@ -1523,6 +1542,8 @@ def family_specs(kind: str, engine: str, n: int, seed: int, *, styles: Optional[
         sp.effects = {e: effect_params(e, engine, level, rng, sp.channels) for e in names}
         if kind == "backlash_held":
             sp.effects["backlash"]["held"] = [1.0, 1.0, 1.0]
+        if biases:
+            sp.biases = draw_biases(_rng(seed, engine, kind, i, "biases"))
         if kind == "disturbance":
             f = _r(rng.uniform(1.2, 2.4))
             ph = _r(rng.uniform(0, 2 * math.pi))

@@ -225,6 +225,31 @@ def test_other_rates_change_the_rate_and_nothing_else_drawn(tmp_path):
     assert truth["rate"] == 100.0 and abs(float(np.median(np.diff(t))) - 0.01) < 1e-9
 
 
+def test_sensor_biases_add_a_constant_per_channel_and_change_nothing_else_drawn(tmp_path):
+    """``biases=True`` (``--biases``) gives each torque, end-effector and IMU channel a
+    constant in its group's range (:data:`families.BIASES`), recorded in the truth; the run
+    is otherwise the same bits."""
+    for kind in ("joint_friction", "nominal"):
+        base = F.family_specs(kind, "mujoco", 3, 5)
+        biased = F.family_specs(kind, "mujoco", 3, 5, biases=True)
+        for a, b in zip(base, biased):
+            da, db = dataclasses.asdict(a), dataclasses.asdict(b)
+            assert da.pop("biases") == {} and set(db.pop("biases")) == {c for c in F.MEAS_ORDER if c[:3] in ("tau", "ee_", "imu")}
+            assert da == db
+            for c, v in b.biases.items():
+                lo, hi = F.BIASES["tau" if c.startswith("tau") else "ee" if c.startswith("ee_") else "imu"]
+                assert lo * 0.999 <= abs(v) <= hi * 1.001, (c, v)
+        assert len({tuple(sorted(sp.biases.items())) for sp in biased}) == 3
+    a, b = F.family_specs("nominal", "popup", 2, 0, duration=3.0)[0], F.family_specs("nominal", "popup", 2, 0, duration=3.0, biases=True)[0]
+    ra, rb = _read(F.make_run(a, tmp_path / "a")[0]), _read(F.make_run(b, tmp_path / "b")[0])
+    assert F.read_truth(rb)["biases"] == b.biases
+    for c in ra.data.columns:
+        ya, yb = ra.data[c].to_numpy(dtype=float), rb.data[c].to_numpy(dtype=float)
+        # the CSV holds 8 significant digits
+        d = (yb - ya)[np.isfinite(ya)]
+        assert np.isfinite(ya).sum() > 100 and np.allclose(d, b.biases.get(c, 0.0), rtol=0.0, atol=5e-8 * max(1.0, float(np.nanmax(np.abs(ya))))), c
+
+
 @pytest.mark.parametrize("style", F.STYLES)
 def test_excitation_styles_start_at_rest_stay_in_range_and_move_every_joint(style):
     t = np.linspace(0.0, 12.0, 24001)
