@@ -348,6 +348,13 @@ def test_constant_sensor_offsets_are_named_with_their_values_where_the_error_is_
     assert dgl.offsets_left(hc) == "" and not hc.problem.fit_offsets and "offset" not in hc.conclusion, hc.conclusion
     # fitted with every model (offsets=True, --offsets; and by default, as what the loop left
     # is all offsets): the run is at its floor, the offsets given
+    # profiled out of a batch, each member as alone: the same bits
+    po = popup.ReplayProblem(nominal, run, offsets=True)
+    flat = np.asarray(nominal.effects_flat, dtype=float)
+    sims = po.simulate(np.array([flat, flat]))
+    zb = po.residuals(sims)
+    assert np.array_equal(zb[0], po.residuals(sims[0])) and np.array_equal(zb[1], zb[0])
+    assert np.all(np.abs(np.nanmean(zb[0][po.used], axis=0)) < 1e-12)
     for how in (True, None):
         h = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1, offsets=how)
         assert h.problem.fit_offsets and h.effects == [] and h.steps[0].error <= dg.AT_FLOOR, h.conclusion
