@@ -136,6 +136,22 @@ def test_delay_shows_at_positive_lag(truth, sim_df, tmp_path):
     assert (c.metrics.loc[["ee_x", "tau1"], "rmse"] < 1e-9).all()
 
 
+def test_a_constant_offset_is_the_errors_mean(truth, noisy_run, tmp_path):
+    """A sensor bias on one channel shows as that channel's ``mean_error`` (measured −
+    simulated) with ``mean_share`` near 1; the other channels' means stay at the noise's
+    scatter."""
+    df = noisy_run.data.copy()
+    df["imu2_ax"] = df["imu2_ax"] + 0.2
+    run = read_run(write_run(tmp_path / "biased", dict(noisy_run.experiment), df))
+    c = pc.compare(truth, run)
+    m = c.metrics
+    n = int(m.loc["imu2_ax", "n_samples"])
+    assert m.loc["imu2_ax", "mean_error"] == pytest.approx(0.2, abs=5 * m.loc["imu2_ax", "noise_std"] / np.sqrt(n))
+    assert m.loc["imu2_ax", "mean_share"] > 0.95
+    others = m.drop(index="imu2_ax")
+    assert (others["mean_error"].abs() <= 5 * others["noise_std"] / np.sqrt(others["n_samples"])).all(), others[["mean_error", "noise_std"]]
+
+
 def test_outputs_and_plots(cmp_wrong):
     import matplotlib
 

@@ -52,6 +52,9 @@ residual ``e = y − ŷ`` (measured − simulated):
   never the measured outputs), not a one-step-ahead prediction error, so it is much
   stricter than the fit % of a one-step predictor;
 * ``max_abs_error`` and ``t_max_error`` [s];
+* ``mean_error = mean(e)`` [unit], the error's constant part (a sensor bias, a calibration
+  offset, a static load), and ``mean_share = mean(e)²/rmse²``, the share of the mean
+  squared error it makes (the residual spectrum leaves it out);
 * ``nrmse = rmse / std(y)`` (dimensionless);
 * ``noise_multiple = rmse / σ`` with σ the channel's white-noise floor estimated from
   the data (:mod:`popup.noise`): 1 = the model is at the noise floor on this channel.
@@ -156,7 +159,8 @@ class Comparison:
     ----------
     metrics : DataFrame
         One row per compared channel (index ``channel``): ``rmse`` [channel unit],
-        ``nrmse_fit_pct`` [%], ``max_abs_error`` [unit], ``t_max_error`` [s], ``unit``,
+        ``nrmse_fit_pct`` [%], ``max_abs_error`` [unit], ``t_max_error`` [s], ``mean_error``
+        [unit] and ``mean_share`` (the error's constant part and its share of rmse²), ``unit``,
         ``nrmse`` (rmse / measured std), ``n_samples``, ``noise_std`` (the channel's
         white-noise floor σ, :mod:`popup.noise`), ``noise_multiple`` (rmse/σ: 1 = at the
         noise floor), ``at_noise_floor`` (the measured signal itself is at its noise floor).
@@ -460,7 +464,8 @@ def compare(
         n = int(ok.sum())
         if n == 0:
             rows.append(dict(channel=c, rmse=math.nan, nrmse_fit_pct=math.nan, max_abs_error=math.nan, t_max_error=math.nan,
-                             unit=UNITS.get(c, ""), nrmse=math.nan, std_measured=math.nan, n_samples=0))
+                             mean_error=math.nan, mean_share=math.nan, unit=UNITS.get(c, ""), nrmse=math.nan, std_measured=math.nan,
+                             n_samples=0))
             continue
         e = y[ok] - yh[ok]
         rmse = float(np.sqrt(np.mean(e * e)))
@@ -469,8 +474,10 @@ def compare(
         fit = 100.0 * (1.0 - en / dev) if dev > 0 else (100.0 if en == 0 else -math.inf)
         std = float(np.std(y[ok]))
         i = int(np.argmax(np.abs(e)))
+        me = float(np.mean(e))
         rows.append(dict(channel=c, rmse=rmse, nrmse_fit_pct=fit, max_abs_error=float(abs(e[i])),
-                         t_max_error=float(t_meas[ok][i]), unit=UNITS.get(c, ""),
+                         t_max_error=float(t_meas[ok][i]), mean_error=me, mean_share=(me * me / (rmse * rmse) if rmse > 0 else 0.0),
+                         unit=UNITS.get(c, ""),
                          nrmse=(rmse / std if std > 0 else (0.0 if rmse == 0 else math.inf)),
                          std_measured=std, n_samples=n))
     metrics = pd.DataFrame(rows).set_index("channel")
