@@ -381,6 +381,25 @@ def test_the_cli_fits_offsets_when_asked_never_when_told_not_to_and_refuses_both
     assert "not allowed with" in capsys.readouterr().err
 
 
+def test_a_failed_pass_with_the_offsets_fitted_returns_the_first_with_a_note(nominal, tmp_path, monkeypatch):
+    t, q = popup.synth.lab_trajectory(5.0, seed=8)
+    run = popup.synth.measured_run(nominal, t, q, tmp_path, seed=8, disturbance=lambda tt: {"tau2": np.full(np.size(tt), -0.3)})
+    real = dgl._improve
+
+    def failing(*a, **kw):
+        if kw["offsets"]:
+            raise popup.StepTooLargeError("second pass broke")
+        return real(*a, **kw)
+
+    monkeypatch.setattr(dgl, "_improve", failing)
+    h = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1)
+    import re
+
+    m = re.search(r"tau2 reads ([-+][0-9.]+) N·m off the model", h.conclusion)
+    assert h.complete and not h.problem.fit_offsets and m and float(m.group(1)) == pytest.approx(-0.3, abs=0.005), h.conclusion
+    assert any("did not complete (StepTooLargeError: second pass broke)" in n for n in h.notes), h.notes
+
+
 def test_friction_under_torque_sensor_offsets_is_fitted_right_with_the_offsets_fitted(nominal, tmp_path):
     """Offsets on the torques break Coulomb friction's symmetry: fitted beside them, friction
     lands on its truth and the error falls to the noise (with the offsets in the error the
