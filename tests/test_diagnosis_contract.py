@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -393,8 +394,6 @@ def test_a_failed_pass_with_the_offsets_fitted_returns_the_first_with_a_note(nom
 
     monkeypatch.setattr(dgl, "_improve", failing)
     h = popup.improve(nominal, run, effects=["payload_mass"], max_rounds=1)
-    import re
-
     m = re.search(r"tau2 reads ([-+][0-9.]+) N·m off the model", h.conclusion)
     assert h.complete and not h.problem.fit_offsets and m and float(m.group(1)) == pytest.approx(-0.3, abs=0.005), h.conclusion
     assert any("did not complete (StepTooLargeError: second pass broke)" in n for n in h.notes), h.notes
