@@ -407,7 +407,10 @@ def test_friction_under_torque_sensor_offsets_is_fitted_right_with_the_offsets_f
     bias = {"tau1": -0.34, "tau2": -0.25, "tau3": 0.23, "imu1_ay": 0.094}
     run = popup.synth.measured_run(nominal.with_effect("joint_friction", **FRICTION), t, q, tmp_path, seed=3,
                                    disturbance=lambda tt: {c: np.full(np.size(tt), b) for c, b in bias.items()})
-    h = popup.improve(nominal, run, effects=["payload_mass", "joint_friction"], max_rounds=2)
+    seen = []
+    h = popup.improve(nominal, run, effects=["payload_mass", "joint_friction"], max_rounds=2, progress=seen.append)
+    # the progress of the second pass says it is that pass
+    assert any(str(i["effect"]).startswith("offsets fitted: ") for i in seen) and not str(seen[0]["effect"]).startswith("offsets"), seen
     assert h.problem.fit_offsets and "fitted because the pass with constant offsets in the error added joint_friction" in h.conclusion
     assert h.effects == ["joint_friction"] and h.steps[-1].error <= 0.1 * h.steps[0].error, h.conclusion
     fit = h.steps[-1].params["joint_friction"]

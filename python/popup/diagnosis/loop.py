@@ -67,6 +67,9 @@ def improve(
         return h
     first = (f"the pass with constant offsets in the error {'added ' + ', '.join(h.effects) if h.effects else 'added nothing'} and left "
              f"{h.steps[-1].error:.3g} noise units, mostly constant offsets ({why})")
+    if progress is not None:
+        outer = progress
+        kw["progress"] = lambda info: outer(dict(info, effect=f"offsets fitted: {info.get('effect', '')}"))
     try:
         h2 = _improve(model, run, offsets=True, **kw)
         err = h2.error
