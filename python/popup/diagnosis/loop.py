@@ -56,7 +56,7 @@ def improve(
     Default (None): not, unless what the loop leaves is mostly constant offsets
     (:func:`offsets_left`): no library effect is a constant on one channel, so the run is
     then diagnosed again with them fitted and that history returned (its conclusion says
-    so; if that pass does not complete, the first is returned with a note)."""
+    so; if that pass does not complete, the first is returned with a note and ``error``)."""
     kw: Dict[str, Any] = dict(max_rounds=max_rounds, effects=effects, channels=channels, sample_rate=sample_rate, threads=threads,
                               max_iter=max_iter, progress=progress, rank_at_floor=rank_at_floor, stop_on_interrupt=stop_on_interrupt)
     h = _improve(model, run, offsets=bool(offsets), **kw)
@@ -76,7 +76,10 @@ def improve(
     except Exception as e:  # noqa: BLE001 - the first pass is complete: it is returned
         err = f"{type(e).__name__}: {e}"
     if err or not h2.complete:
+        # the first pass is a whole answer, but not the one asked for: incomplete (exit code 1)
         h.notes.append(f"{first}; the pass with a constant offset fitted per channel did not complete ({err}): this is the first")
+        h.error = f"the pass with the offsets fitted: {err}"
+        h.conclusion = h.conclusion[:-1] + f"; incomplete: {first}, and the pass with them fitted did not complete ({err})."
         return h
     h2.notes.insert(0, f"{first}: diagnosed again with a constant offset fitted per channel (offsets=True, --offsets)")
     h2.conclusion = h2.conclusion[:-1] + f"; fitted because {first}."
