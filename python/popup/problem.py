@@ -854,7 +854,8 @@ class ReplayProblem:
         as given, its offsets not taken out whatever ``offsets``), per channel with a finite one: ``offset`` = mean(y − ŷ) in the channel's
         unit (what the measured channel reads above the model: a sensor bias, a calibration
         offset), ``z_mean`` the same in noise units and ``share`` the part of the channel's
-        excess ``Σ z² − n`` it makes (``n·mean(z)²`` of it, 0..1). The spectrum of the
+        excess ``Σ z² − n`` it makes (``n·mean(z)²`` of it, 0..1), with ``n`` and ``excess``
+        themselves. The spectrum of the
         residual leaves the mean out (:attr:`~popup.Comparison.spectrum`); this is it."""
         if z is None:
             z = (self.nominal_simulation() - self.measured) / self.sigma
@@ -866,7 +867,7 @@ class ReplayProblem:
                 continue
             m = float(np.mean(x))
             excess = float(np.sum(x * x)) - x.size
-            out[c] = {"offset": -m * float(self.sigma[j]), "z_mean": m,
+            out[c] = {"offset": -m * float(self.sigma[j]), "z_mean": m, "n": float(x.size), "excess": excess,
                       "share": float(min(max(x.size * m * m / excess, 0.0), 1.0)) if excess > 0 else 0.0}
         return out
 

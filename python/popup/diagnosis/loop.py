@@ -96,20 +96,13 @@ def offsets_left(h: History) -> str:
     prob = h.problem
     if prob is None or prob.fit_offsets or last.error <= AT_FLOOR or step_at_floor(last, prob):
         return ""
-    fp = final_problem(prob, last)
-    z = (fp.nominal_simulation() - fp.measured) / fp.sigma
-    z = z[fp.used]
     const, excess, big = 0.0, 0.0, []
-    for j, c in enumerate(fp.channels):
-        x = z[:, j]
-        x = x[np.isfinite(x)]
-        if x.size < 2:
-            continue
-        m = float(np.mean(x))
-        const += x.size * m * m
-        excess += max(float(np.sum(x * x)) - x.size, 0.0)
-        if abs(m) * math.sqrt(x.size) >= OFFSET_Z:
-            big.append((c, m * fp.sigma[j] * -1.0, x.size * m * m))
+    for c, v in final_problem(prob, last).offsets().items():
+        m, n = v["z_mean"], v["n"]
+        const += n * m * m
+        excess += max(v["excess"], 0.0)
+        if abs(m) * math.sqrt(n) >= OFFSET_Z:
+            big.append((c, v["offset"], n * m * m))
     if not big or excess <= 0 or const < OFFSET_SHARE * excess:
         return ""
     big.sort(key=lambda b: -b[2])
