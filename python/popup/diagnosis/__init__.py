@@ -92,13 +92,20 @@ from the same effect's fit of the round before. From round 3 on (two effects in 
 the screen itself is cheap: each candidate is fitted from its fit of the round before
 alone, and only the :data:`JOINT_TOP` best (and any significant) get the full multi-start
 fit (``diagnose(screen=)``). A greedy first round can pick one effect for the error of two;
-three steps undo it. *Backward*: an effect added earlier that the refitted model no longer
+four steps undo it. *Backward*: an effect added earlier that the refitted model no longer
 needs (by the rules that add one) is removed. *Swap*: an effect added earlier is replaced
 by the best candidate for the model without it when that model beats the current one
 (BIC gain over the threshold, held-out error lower). *Base law*: when
 nothing is significant but the model is not at its floor, an effect added with a variant's
 extra parameters (a payload's centre-of-mass offset) is set back to its base law and the
-best candidate then added, on the same test. The swap and the base law offer only
+best candidate then added, on the same test. *Pair*: when one effect was added, nothing
+is significant beside it and the error left is above the floor, it may stand in for two
+effects that each explain little alone (drag and a payload, mimicked by a backlash with
+link-side inertia and contact damping); for each of the :data:`PAIR_HINTS` best candidates
+that pass the likelihood threshold beside it without being significant, the nominal model
+with that candidate is diagnosed over the candidates significant in some round, each
+fitted jointly with it from its seeds, and the best pair replaces the effect on the same
+test. The swap and the base law offer only
 candidates some round found significant (an effect another stood in for explained much of
 the same error when that one was chosen), each (effect, candidate) pair once; what they
 tried and why it was or was not kept is in ``History.notes``. Each history step names its
@@ -136,6 +143,7 @@ from .rules import (
     MIN_EXPLAINED,
     NOISE_RECHECK,
     OFFSET_SHARE,
+    PAIR_HINTS,
     OFFSET_Z,
     PLAY_READINGS,
     SCORE_THRESHOLD,
@@ -167,6 +175,7 @@ __all__ = [
     "FLOOR_MULTIPLE",
     "NOISE_RECHECK",
     "OFFSET_SHARE",
+    "PAIR_HINTS",
     "OFFSET_Z",
     "SPIKE_SHARE",
     "PLAY_READINGS",

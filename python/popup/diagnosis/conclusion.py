@@ -87,9 +87,10 @@ def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) 
     for i in range(1, len(h.steps)):
         prev, st = h.steps[i - 1], h.steps[i]
         if st.removed and st.swapped_in:
-            e = st.swapped_in
-            ptxt = fmt_params({k: v for k, v in st.params.get(e, {}).items() if k in st.ci95.get(e, {})}, st.ci95.get(e, {})) or fmt_params(st.params.get(e, {}), {})
-            parts.append(f"replaced {st.removed} by {e} ({ptxt}): {st.removed} stood in for it; the error "
+            new = st.swapped_in.split(" + ")
+            ptxt = "; ".join((f"{e}: " if len(new) > 1 else "") + (fmt_params({k: v for k, v in st.params.get(e, {}).items() if k in st.ci95.get(e, {})},
+                                                                               st.ci95.get(e, {})) or fmt_params(st.params.get(e, {}), {})) for e in new)
+            parts.append(f"replaced {st.removed} by {st.swapped_in} ({ptxt}): {st.removed} stood in for {'them' if len(new) > 1 else 'it'}; the error "
                          f"{'fell' if st.error < prev.error else 'went'} from {prev.error:.3g} to {st.error:.3g} noise units")
             continue
         if st.removed:

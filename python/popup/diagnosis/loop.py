@@ -16,9 +16,9 @@ from ..io import MeasuredRun
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
 from ..results import UNITS
-from .rules import (AT_FLOOR, ENCODER_NOTE, JOINT_TOP, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, Progress, SCORE_THRESHOLD,
+from .rules import (AT_FLOOR, ENCODER_NOTE, JOINT_TOP, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, PAIR_HINTS, Progress, SCORE_THRESHOLD,
                     STEP_HALVINGS, model_at_floor)
-from .results import Diagnosis, History, HistoryStep, final_problem, step_at_floor
+from .results import Diagnosis, History, HistoryStep, Suspect, final_problem, step_at_floor
 from .candidate import left_out, unresolved_play
 from .conclusion import conclude
 from .rank import diagnose
@@ -138,6 +138,7 @@ def _improve(
     added: List[str] = []
     fitted_params: Dict[str, List[str]] = {}
     swap_tried: Dict[str, Set[str]] = {}
+    pair_tried: Set[Tuple[str, str]] = set()  # (the effect swapped out, the hint) of each pair step
     notes: List[str] = []  # what the swap and base-law steps tried and why, the floors re-estimated
     current, cprob = model, prob
     error = ""
@@ -153,7 +154,7 @@ def _improve(
         d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, rank_at_floor=rank_at_floor)
         diags.append(d)
         while rnd < max_rounds:
-            reset = ""
+            reset, pair_out = "", ""  # the effect set back to its base law, or swapped out for a pair
             if d.best is not None:
                 rnd += 1
                 s = d.best
@@ -186,13 +187,30 @@ def _improve(
                         if lw is not None:
                             reset = e
                             break
-                if lw is None:
+                pr = None
+                if lw is None and len(added) == 1 and not step_at_floor(steps[-1], prob):
+                    # one effect added and a systematic error left: it may stand in for two
+                    # effects neither of which explains much alone (drag beside a payload:
+                    # a backlash with link-side inertia and contact damping mimics both)
+                    hints = [s for s in _hints(d) if (added[0], s.effect) not in pair_tried]
+                    pair_tried.update((added[0], s.effect) for s in hints)
+                    stage, stage_round = f"swap {added[0]} for a pair: ", rnd + 1
+                    pr = _try_pair(prob, run, cprob, added[0], fitted_params, hints, diags, effects, threads, max_iter, prog, notes)
+                    stage = ""
+                if lw is not None:
+                    c, current, cprob, ci, fitted_params, d_new = lw
+                    added.append(c)
+                elif pr is not None:
+                    _, current, cprob, ci, fitted_params, d_new = pr
+                    pair_out, added[:] = added[0], list(fitted_params)
+                else:
                     break
                 rnd += 1
-                c, current, cprob, ci, fitted_params, d_law = lw
-                added.append(c)
-                diags.append(d_law)
-            steps.append(_step(cprob, added, ci, rnd, law_reset=reset))
+                diags.append(d_new)
+            if pair_out:
+                steps.append(_step(cprob, added, ci, rnd, removed=pair_out, swapped_in=" + ".join(added)))
+            else:
+                steps.append(_step(cprob, added, ci, rnd, law_reset=reset))
             prob, cprob, steps = _floors_update(prob, cprob, steps, notes, rnd)
             # backward and swap steps, around the newest effect (the one just added, or
             # just swapped in: the others are then all "earlier" than it), until no swap
@@ -427,6 +445,50 @@ def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept
         _note(log, f"{what}: failed ({type(ex).__name__}: {ex}); the model stands")
         return None
     return s.effect, m2, p2, ci2, nf, d
+
+
+def _hints(d: Diagnosis) -> List[Suspect]:
+    """The candidates of ``d`` that pass the significance threshold in likelihood but were
+    not significant (they explain less than :data:`MIN_EXPLAINED` of what is left), best
+    first, at most :data:`PAIR_HINTS`: beside an effect that stands in for two, what one of
+    the two still explains."""
+    out = [s for s in d.suspects if s.tested and not s.significant and math.isfinite(s.score) and s.score > SCORE_THRESHOLD]
+    return sorted(out, key=lambda s: -s.score)[:PAIR_HINTS]
+
+
+def _try_pair(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, fitted: Dict[str, List[str]],
+              hints: Sequence[Suspect], diags: Sequence[Diagnosis], effects: Optional[Sequence[str]], threads: int, max_iter: int,
+              progress: Optional[Progress],
+              log: Optional[List[str]] = None) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+    """Whether the one added ``effect`` (model of ``cprob``) is better replaced by a pair:
+    for each hint ``b`` (:func:`_hints` of the current model's diagnosis, best first), the
+    nominal model of ``prob`` with ``b`` at its hint's fit is diagnosed over the candidates
+    some round found significant (not ``effect``), each fitted jointly with ``b`` from its
+    seeds (a pair whose members interact is found only together: a payload fitted alone
+    beside the drag it hides lands in another basin), and the best added and both refitted.
+    The first pair that beats the current model (:func:`_beats`: BIC gain over the
+    threshold, held-out error lower) is returned as :func:`_best_added` returns it, its
+    fitted names in the order (``b``, the other); else ``None``. ``log``: a line per hint
+    saying what was tried and why it was (not) kept."""
+    for h in hints:
+        pool = [c for c in _significant_in(diags) if c not in (effect, h.effect) and (effects is None or c in effects)]
+        if not pool:
+            _note(log, f"swap of {effect} for {h.effect} and another: no other candidate was significant in any round")
+            continue
+        what = f"swap of {effect} for {h.effect} (a likelihood gain of {h.score:.3g} beside it) and one of {', '.join(pool)}, each fitted with it from its seeds"
+        try:
+            m = prob.model.with_effect(h.effect, **h.params)  # not h.apply: that brings the refitted effect back
+            base = fit_unseen_motion(prob.with_model(m.with_dt(h.dt) if math.isfinite(h.dt) and h.dt < m.dt else m))
+        except KeyboardInterrupt:
+            raise
+        except Exception as ex:  # noqa: BLE001 - the current model stands
+            _note(log, f"{what}: failed setting up {h.effect} ({type(ex).__name__}: {ex}); the model stands")
+            continue
+        out = _best_added(prob, run, base, [h.effect], {h.effect: list(h.fitted)}, pool, [], threads, max_iter, progress, cprob,
+                          {effect: fitted[effect]}, log=log, what=what, joint=True)
+        if out is not None:
+            return out
+    return None
 
 
 def _step(cprob: ReplayProblem, added: Sequence[str], ci: Dict[str, Dict[str, List[float]]], rnd: int, **kw: Any) -> HistoryStep:

@@ -335,7 +335,8 @@ class HistoryStep:
     removed: str = ""
     """The effect this step removed (backward or swap step), "" when it only added one."""
     swapped_in: str = ""
-    """The effect a swap step put in place of ``removed`` ("" otherwise)."""
+    """The effect a swap step put in place of ``removed``, or the pair ("a + b", both in
+    ``effects``) the pair step put there ("" otherwise)."""
     law_reset: str = ""
     """The effect this step set back to its base law (a richer variant's extra parameters
     neutral again: they had stood in for the effect this step added), "" otherwise."""

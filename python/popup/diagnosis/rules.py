@@ -46,6 +46,14 @@ SPIKE_SHARE = 0.5
 replay at the floor can have one: a friction reversal a sample early is a one-sample step)."""
 
 
+PAIR_HINTS = 2
+"""The loop's pair step (:func:`popup.diagnosis.improve`): when one effect was added and a
+systematic error is left with nothing significant, it is tried replaced by a pair, one of
+which is among this many best candidates that pass the likelihood threshold beside it but
+explain too little of what is left to be significant (each hint costs a joint fit of every
+candidate significant in some round)."""
+
+
 OFFSET_SHARE = 0.5
 """Share of a channel's excess above which the unexplained error names the residual's
 constant part (:meth:`ReplayProblem.offsets`: a sensor bias or a calibration offset; no
