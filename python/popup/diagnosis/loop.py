@@ -378,9 +378,11 @@ def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
               effects: Optional[Sequence[str]], diags: Sequence[Diagnosis], threads: int, max_iter: int,
               progress: Optional[Progress], log: Optional[List[str]] = None) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]]]]:
     """Whether ``effect`` (added earlier) is better replaced by another candidate: the
-    model of ``cprob`` without it is diagnosed (the other added effects refitted with each
-    candidate), its best significant candidate put in its place and every added effect
-    refitted; the swap is returned (the new effect, model, problem, intervals and fitted
+    model of ``cprob`` without it is diagnosed (the candidates screened with the other
+    added effects held, the :data:`JOINT_TOP` best fitted from their seeds with those
+    refitted: refitted without the stand-in, they sit off and the screen misranks, a drag
+    run to a high cd ranking higher modes above the missing payload), its best significant
+    candidate put in its place and every added effect refitted; the swap is returned (the new effect, model, problem, intervals and fitted
     names) when it beats the current model by the significance threshold in BIC (likelihood
     ratio less ln n_eff per extra parameter, the effects being non-nested) and lowers the
     held-out error too; else ``None``. A failure keeps the current model. ``log``: a line
@@ -401,7 +403,7 @@ def _try_swap(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
         _note(log, f"{what}: failed refitting {', '.join(others)} without it ({type(ex).__name__}: {ex}); the model stands")
         return None
     best = _best_added(prob, run, bprob, others, {e: list(fitted[e]) for e in others}, pool, diags, threads, max_iter, progress, cprob, fitted,
-                       log=log, what=what)
+                       log=log, what=what, screen=JOINT_TOP)
     if best is None:
         return None
     c, m2, p2, ci2, nf, _ = best
@@ -413,7 +415,7 @@ def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept
                 diags: Sequence[Diagnosis], threads: int, max_iter: int,
                 progress: Optional[Progress], cur: ReplayProblem,
                 fitted_cur: Mapping[str, Sequence[str]], log: Optional[List[str]] = None, what: str = "",
-                joint: bool = False) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+                joint: bool = False, screen: int = 1) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
     """The model of ``base`` with the best significant candidate among ``pool`` added (the
     candidates diagnosed with the effects ``kept``, fitted names ``fitted``, refitted with
     each; the best added and everything refitted jointly), if it beats the current model
@@ -421,12 +423,14 @@ def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept
     motion, intervals, fitted names, the diagnosis), or ``None``: no candidate significant,
     the current model better, or a failure (the current model stands). ``log``: a line
     saying what (``what``) was tried and why it was (not) kept is appended. ``joint``: as
-    :func:`diagnose`'s (every candidate fitted jointly with ``kept`` from its seeds)."""
+    :func:`diagnose`'s (every candidate fitted jointly with ``kept`` from its seeds).
+    ``screen``: the number of best-screened candidates that get the full fit
+    (:func:`diagnose`'s)."""
     what = what or "candidates " + ", ".join(pool)
     try:
-        # only the best candidate is taken: the cheap screen picks the one that gets the full fit
+        # only the best candidate is taken: the cheap screen picks the ``screen`` that get the full fit
         d = diagnose(base.model, run, effects=pool, threads=threads, max_iter=max_iter, problem=base, progress=progress, refit=fitted,
-                     starts=_prior_fits(diags), screen=1, joint=joint)
+                     starts=_prior_fits(diags), screen=screen, joint=joint)
         s = d.best
         if s is None:
             _note(log, f"{what}: no candidate significant; the model stands")
