@@ -127,6 +127,28 @@ def test_history_names_swaps_removals_and_a_law_set_back():
     assert "<li>swap of payload_mass (candidates torsion): torsion not kept (BIC gain -3.1" in to_html(h)
 
 
+def test_history_names_a_pair_swapped_in_for_one_effect():
+    """The pair step's history step (one effect replaced by two, ``swapped_in`` = "a + b")
+    in the table, the conclusion (each member's values) and the JSON."""
+    from popup.diagnosis import History, HistoryStep
+    from popup.diagnosis.conclusion import conclude as _conclude
+
+    ch = {"tau1": 1.0}
+    steps = [
+        HistoryStep([], {}, 2730.0, {"tau1": 2730.0}),
+        HistoryStep(["backlash"], {"backlash": {"gap": [0.001, 0.0, 0.004]}}, 170.0, ch, round=1),
+        HistoryStep(["air_drag", "payload_mass"], {"air_drag": {"cd": [7.49]}, "payload_mass": {"delta_kg": [0.2503]}}, 0.142, ch, round=2,
+                    removed="backlash", swapped_in="air_drag + payload_mass"),
+    ]
+    h = History(steps, [], "")
+    assert list(h.to_pandas()["change"]) == ["", "+ backlash", "backlash → air_drag + payload_mass"]
+    text = _conclude(h, 4)
+    assert ("replaced backlash by air_drag + payload_mass (air_drag: cd=7.49; payload_mass: delta_kg=0.2503): backlash stood in for them; "
+            "the error fell from 170 to 0.142 noise units") in text, text
+    js = h.to_dict()["history"][-1]
+    assert (js["removed"], js["swapped_in"], js["effects"], js["round"]) == ("backlash", "air_drag + payload_mass", ["air_drag", "payload_mass"], 2)
+
+
 def test_rollout_count_is_the_number_of_simulations_run(monkeypatch):
     run = popup.read_run(RUN)
     model = run.model()
