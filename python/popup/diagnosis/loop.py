@@ -207,10 +207,7 @@ def _improve(
                     break
                 rnd += 1
                 diags.append(d_new)
-            if pair_out:
-                steps.append(_step(cprob, added, ci, rnd, removed=pair_out, swapped_in=" + ".join(added)))
-            else:
-                steps.append(_step(cprob, added, ci, rnd, law_reset=reset))
+            steps.append(_step(cprob, added, ci, rnd, law_reset=reset, removed=pair_out, swapped_in=" + ".join(added) if pair_out else ""))
             prob, cprob, steps = _floors_update(prob, cprob, steps, notes, rnd)
             # backward and swap steps, around the newest effect (the one just added, or
             # just swapped in: the others are then all "earlier" than it), until no swap
