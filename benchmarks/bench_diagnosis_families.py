@@ -37,6 +37,7 @@ Prints a table and writes ``OUT/summary.json``. Asserts nothing.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import os
@@ -339,6 +340,32 @@ def _commit() -> Optional[str]:
     return (c + ("+dirty" if dirty else "")) or None
 
 
+#: What decides a diagnosis: the package, the core and its bindings, the locked crates and the
+#: Python pins. Results pool into one *diagnosis version* only where all of them are the same.
+DIAGNOSIS_PATHS = ("python/popup", "crates/popup-core", "crates/popup-py", "Cargo.lock", "pyproject.toml", "requirements-dev.txt")
+
+
+def diagnosis_version(commit: Optional[str], root: Optional[Path] = None) -> Optional[str]:
+    """A 12-hex fingerprint of :data:`DIAGNOSIS_PATHS` at ``commit`` (git object ids of each,
+    hashed together), so that results from commits that differ only elsewhere (docs, the
+    benchmarks, the tests) count as one code version. ``None`` for an unknown commit, a
+    ``+dirty`` one or a checkout without git."""
+    if not commit or commit.endswith("+dirty") or commit == "unrecorded":
+        return None
+    root = root or Path(__file__).resolve().parents[1]
+    ids = []
+    for path in DIAGNOSIS_PATHS:
+        try:
+            r = subprocess.run(["git", "rev-parse", "--verify", "--quiet", f"{commit}:{path}"], cwd=root,
+                               capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        if r.returncode != 0 and path in DIAGNOSIS_PATHS[:2]:
+            return None
+        ids.append(f"{path}={r.stdout.strip() or '-'}")
+    return hashlib.sha1("\n".join(ids).encode()).hexdigest()[:12]
+
+
 def cached_rows(dirs: Sequence[str]) -> List[Dict[str, Any]]:
     """Every result cached under ``dirs`` (``DIR/results/*.json``), each re-classified from
     its stored output with this script's :func:`classify`."""
@@ -358,15 +385,32 @@ def cached_rows(dirs: Sequence[str]) -> List[Dict[str, Any]]:
     return rows
 
 
-def pool(dirs: Sequence[str], engines: Sequence[str]) -> int:
-    """The tables over every result cached under ``dirs`` (see :func:`cached_rows`)."""
+def pool(dirs: Sequence[str], engines: Sequence[str], by_version: bool = False) -> int:
+    """The tables over every result cached under ``dirs`` (see :func:`cached_rows`); with
+    ``by_version`` one set of tables per :func:`diagnosis_version`, so that a rate is only
+    claimed over runs diagnosed by the same code."""
     rows = cached_rows(dirs)
     commits = sorted({str(r.get("commit") or "unrecorded") for r in rows})
     print(f"pooled {len(rows)} results from {len(dirs)} folder(s); popup commits: {', '.join(commits)}\n")
-    for eng in engines:
-        if any(r["truth"]["engine"] == eng for r in rows):
-            print(table(rows, eng)[0])
-            print()
+    groups: Dict[str, List[Dict[str, Any]]] = {"all versions": rows}
+    if by_version:
+        memo: Dict[str, Optional[str]] = {}
+        groups = {}
+        for r in rows:
+            c = str(r.get("commit") or "unrecorded")
+            if c not in memo:
+                memo[c] = diagnosis_version(c)
+            groups.setdefault(memo[c] or "unknown version", []).append(r)
+        for v, g in groups.items():
+            print(f"diagnosis version {v}: {len(g)} results, commits {', '.join(sorted({str(r.get('commit') or 'unrecorded') for r in g}))}")
+        print()
+    for v, g in groups.items():
+        for eng in engines:
+            if any(r["truth"]["engine"] == eng for r in g):
+                if by_version:
+                    print(f"== diagnosis version {v}")
+                print(table(g, eng)[0])
+                print()
     return 0
 
 
@@ -394,10 +438,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--diagnose-args", default="", help="extra arguments for popup diagnose (one string, split on spaces)")
     ap.add_argument("--pool", nargs="+", metavar="DIR", help="only the tables, over every result cached in these --out folders "
                     "(re-classified with this script; e.g. several seeds pooled)")
+    ap.add_argument("--by-version", action="store_true", help="with --pool: one set of tables per diagnosis version (the content of "
+                    f"{', '.join(DIAGNOSIS_PATHS)} at each result's commit), so rates are claimed on one code version")
     a = ap.parse_args(argv)
 
     if a.pool:
-        return pool(a.pool, ["popup", "mujoco"] if a.engine == "both" else [a.engine])
+        return pool(a.pool, ["popup", "mujoco"] if a.engine == "both" else [a.engine], by_version=a.by_version)
     engines = ["popup", "mujoco"] if a.engine == "both" else [a.engine]
     out = Path(a.out)
     (out / "results").mkdir(parents=True, exist_ok=True)

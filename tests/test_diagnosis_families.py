@@ -400,6 +400,52 @@ def test_report_only_tables_the_cache_and_generates_nothing(tmp_path, capsys):
     assert "1 cached result" in capsys.readouterr().out
 
 
+def test_diagnosis_version_pools_commits_that_differ_only_outside_the_diagnosis(tmp_path, capsys):
+    import subprocess
+
+    def git(*args):
+        return subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True, text=True).stdout.strip()
+
+    git("init", "-q")
+    git("config", "user.email", "t@t"), git("config", "user.name", "t")
+    for d in ("python/popup", "crates/popup-core", "docs"):
+        (tmp_path / d).mkdir(parents=True)
+    (tmp_path / "python/popup/loop.py").write_text("A = 1\n")
+    (tmp_path / "crates/popup-core/lib.rs").write_text("// core\n")
+    (tmp_path / "docs/x.md").write_text("one\n")
+    git("add", "."), git("commit", "-qm", "one")
+    c1 = git("rev-parse", "--short", "HEAD")
+    (tmp_path / "docs/x.md").write_text("two\n")
+    git("commit", "-qam", "docs only")
+    c2 = git("rev-parse", "--short", "HEAD")
+    (tmp_path / "python/popup/loop.py").write_text("A = 2\n")
+    git("commit", "-qam", "code")
+    c3 = git("rev-parse", "--short", "HEAD")
+    v = [bench.diagnosis_version(c, root=tmp_path) for c in (c1, c2, c3)]
+    assert v[0] is not None and v[0] == v[1] != v[2]
+    assert bench.diagnosis_version(c1 + "+dirty", root=tmp_path) is None
+    assert bench.diagnosis_version("unrecorded", root=tmp_path) is None
+    assert bench.diagnosis_version("0" * 40, root=tmp_path) is None
+    # --pool --by-version: one set of tables per version; an unknown commit is its own group
+    out = tmp_path / "fam"
+    (out / "results").mkdir(parents=True)
+    eff = {"kind": "effect", "family": "payload_mass", "hidden": ["payload_mass"], "engine": "mujoco", "style": "lab"}
+    js = _js([([], 10.0), (["payload_mass"], 0.2)], [("payload_mass", True)])
+    for i, c in enumerate((c1, c2, c3, None)):
+        row = {"run": f"r{i}", "truth": eff, "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0}, "json": js, "commit": c}
+        (out / "results" / f"mujoco-payload_mass-{i:03d}.json").write_text(json.dumps(row))
+    old = bench.diagnosis_version
+    try:
+        bench.diagnosis_version = lambda c, root=tmp_path: old(c, root=root)
+        assert bench.main(["--pool", str(out), "--by-version", "--engine", "mujoco"]) == 0
+    finally:
+        bench.diagnosis_version = old
+    text = capsys.readouterr().out
+    assert f"diagnosis version {v[0]}: 2 results" in text and f"diagnosis version {v[2]}: 1 results" in text
+    assert "diagnosis version unknown version: 1 results" in text
+    assert text.count("engine: mujoco  (2 runs)") == 1 and text.count("engine: mujoco  (1 runs)") == 2
+
+
 def test_rate_bounds_are_exact_binomial_bounds_that_cover_at_their_level():
     # k = n and k = 0 have closed forms: lower = (1 - level)^(1/n), upper = 1 - (1 - level)^(1/n)
     for n in (1, 12, 59):
