@@ -33,7 +33,12 @@ tight local interval the data cannot support.
 Parameters that span decades (:data:`LOG_PARAMS`, e.g. a torsional stiffness from a
 soft 5 N·m/rad to a nearly rigid 1.5e4 N·m/rad) are fitted as their logarithm (steps and
 trust region in e-folds); values, intervals and the returned Jacobian are in the
-parameter's own units.
+parameter's own units. A parameter whose effect grows as it moves below its upper bound
+over decades (:data:`LOG_GAP_PARAMS`: wrinkling's stiffness ratio, from a softening of
+1e-4, 0.9999, to 0.01) is fitted as the logarithm of that distance, the solver's lower
+bound standing for the upper bound itself (no effect): in the ratio itself the solver's
+steps (its 0.3 scale, a start nudged off the bound by a fifth of it) jump over a softening
+of 7e-4 whose objective is a few 1e-4 wide.
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ __all__ = [
     "SEEDS",
     "BOUNDS",
     "LOG_PARAMS",
+    "LOG_GAP_PARAMS",
     "FitOutcome",
     "free_params",
     "params_dict",
@@ -104,7 +110,7 @@ SEEDS: Dict[str, List[Dict[str, Any]]] = {
     "joint_friction": [{"tau_c": 0.5, "b": 0.1}, {"tau_c": 2.0, "b": 0.5}, {"tau_c": 0.2, "b": 1.0}],
     "backlash": [{"gap": g} for g in (1e-4, 3e-4, 1e-3, 3e-3, 0.01, 0.03)],
     "pressure_leak": [{"rate": 0.005}, {"rate": 0.05}],
-    "wrinkling": [{"ratio": r, "mw_scale": m} for r in (0.3, 0.6) for m in (0.4, 0.7, 1.0)],
+    "wrinkling": [{"ratio": r, "mw_scale": m} for r in (0.3, 0.6, 0.99, 0.999) for m in (0.4, 0.7, 1.0)],
     "payload_mass": [{"delta_kg": d} for d in (-1.0, -0.6, -0.3, -0.15, 0.15, 0.3, 0.6, 1.0, 1.5)],
     "sensor_delay": [{"imu": d, "torque": d, "mocap": d} for d in (0.003, 0.01, 0.02, 0.05)],
     "air_drag": [{"cd": 1.0}, {"cd": 5.0}, {"cd": 20.0}],
@@ -143,11 +149,24 @@ BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
 #: Positive parameters fitted as their logarithm (module docs).
 LOG_PARAMS = {("torsion", "k_t"), ("backlash", "inertia"), ("backlash", "contact_k"), ("joint_friction", "v_eps"), ("higher_bending_modes", "root_ratio")}
 
+#: Parameters at most their upper bound, fitted as the logarithm of their distance below it:
+#: a wrinkled stiffness ratio from 0.01 to a softening of 1e-4 (0.9999), which a
+#: fit in the ratio itself (steps of its 0.3 scale) jumps over (module docs).
+LOG_GAP_PARAMS = {("wrinkling", "ratio")}
+
+#: The smallest distance below the upper bound a :data:`LOG_GAP_PARAMS` entry resolves, as a
+#: fraction of its range; the solver's bound there stands for the upper bound itself.
+LOG_GAP_MIN = 1e-7
+
 _NUDGE = 0.2
 
 
 def _is_log(p: fx.EffectParam) -> bool:
     return (p.effect, p.name) in LOG_PARAMS
+
+
+def _is_log_gap(p: fx.EffectParam) -> bool:
+    return (p.effect, p.name) in LOG_GAP_PARAMS
 
 
 @dataclass
@@ -217,20 +236,27 @@ def fit(
 
     train = prob.train if mask is None else mask
     lg = np.array([_is_log(p) for p, _ in free], dtype=bool)
+    lu = np.array([_is_log_gap(p) for p, _ in free], dtype=bool)
     lo_v = np.array([p.lower for p, _ in free])
     hi_v = np.array([p.upper for p, _ in free])
     sc_v = np.array([PARAM_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, dtype=float)
-    # the solver's variables: ln v for LOG_PARAMS entries (scale: one e-fold), else v
+    # the solver's variables: ln v for LOG_PARAMS entries, ln(upper − v) for LOG_GAP_PARAMS
+    # entries (scale: one e-fold; the solver's lower bound there is v = upper), else v
+    gap_min = np.where(lu, LOG_GAP_MIN * np.where(lu & np.isfinite(hi_v - lo_v), hi_v - lo_v, 1.0), 1.0)
+    gap_lo = np.log(gap_min)
 
     def to_s(v: np.ndarray) -> np.ndarray:
         v = np.asarray(v, dtype=float)
-        return np.where(lg, np.log(np.where(lg, np.clip(v, 1e-300, 1e300), 1.0)), v)
+        gap = np.log(np.where(lu, np.maximum(np.where(lu, hi_v, 0.0) - v, gap_min), 1.0))
+        return np.where(lg, np.log(np.where(lg, np.clip(v, 1e-300, 1e300), 1.0)), np.where(lu, gap, v))
 
     def to_v(x: np.ndarray) -> np.ndarray:
-        return np.where(lg, np.exp(np.where(lg, x, 0.0)), x)
+        gap = np.where(lu & (x > gap_lo), np.exp(np.where(lu, x, 0.0)), 0.0)
+        return np.where(lg, np.exp(np.where(lg, x, 0.0)), np.where(lu, hi_v - gap, x))
 
-    lo, hi = to_s(lo_v), to_s(hi_v)
-    sc = np.where(lg, 1.0, sc_v)
+    lo = np.where(lu, gap_lo, to_s(lo_v))
+    hi = np.where(lu, np.log(np.where(lu, np.maximum(hi_v - lo_v, gap_min), 1.0)), to_s(hi_v))
+    sc = np.where(lg | lu, 1.0, sc_v)
 
     idx = np.array([p.offset + i for p, i in free], dtype=int)
     # a start on a bound stalls the trust-region-reflective steps (their scaling is the
@@ -312,7 +338,7 @@ def fit(
     w = _weights(ms)
     v = to_v(x)
     # the Jacobian in the parameters' own units: d/dv = (1/v) d/d(ln v)
-    dsdv = np.where(lg, 1.0 / np.where(lg, v, 1.0), 1.0)
+    dsdv = np.where(lg, 1.0 / np.where(lg, v, 1.0), np.where(lu, -1.0 / np.maximum(np.where(lu, hi_v, 0.0) - v, gap_min), 1.0))
     J = _jac(x, w) * dsdv[None, :]
     row_t = np.repeat(np.asarray(prob.time, dtype=float)[train], z.shape[1])
     return FitOutcome(x=v, flat=flat_of(x), z=z, J=J, weights=w, nfev=prob.nfev - n0, r=vec(z, w), row_t=row_t)
