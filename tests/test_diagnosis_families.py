@@ -493,6 +493,30 @@ def test_a_near_threshold_wrinkling_is_fitted_from_no_effect(tmp_path):
     assert err_fit <= 1.1 * err_true + 0.05, (err_fit, err_true)
 
 
+def test_a_near_threshold_wrinkling_is_ranked_on_its_own_unseen_motion(tmp_path):
+    """The unseen servo motion (``popup.unseen``) fitted on the nominal model takes part of
+    a missing softening. On a popup-engine family draw (rigid joints) with a
+    near-threshold wrinkling (ratio 0.9993, moment 0.70 ×; seed 383's run), the compliance
+    fitted on the nominal model pulled the wrinkling fit to its moment's lower bound (0.1 ×,
+    0.52 noise units) and a 1.5 g payload ranked first. Refitted on the motion its own
+    model gives (``refit_with_own_unseen``), wrinkling ranks first, at the truth, and its
+    suspect carries that motion for the loop."""
+    from popup.diagnosis.rank import diagnose
+
+    sp = F.family_specs("wrinkling", "popup", 1, 383)[0]
+    path, truth = F.make_run(sp, tmp_path)
+    tr = truth["effects"]["wrinkling"]
+    assert truth["level"] == "near" and 1.0 - tr["ratio"] < 2e-3
+    run = _read(path)
+    d = diagnose(run.model(), run, effects=["wrinkling", "payload_mass"], threads=1)
+    best = d.best
+    assert best is not None and best.effect == "wrinkling", [(s.effect, s.score) for s in d.suspects]
+    assert abs(best.params["ratio"][0] - tr["ratio"]) < 1e-4 and abs(best.params["mw_scale"][0] - tr["mw_scale"]) < 0.15, best.params
+    assert best.unseen is not None and best.to_dict()["unseen_compliance"] == [float(c) for c in best.unseen[0]]
+    # its score is against the round's nominal replay, as every other candidate's
+    assert best.error_before == pytest.approx(d.nominal_error, rel=1e-12)
+
+
 # ---------------------------------------------------------------------------- the encoder floor
 
 

@@ -73,7 +73,9 @@ none significant.
 **What the encoder cannot see.** A coarse encoder also hides motion: a held motor that
 yields to the links' ringing by a fraction of a step (a servo's finite stiffness) never
 changes its reading, and the replay holds it still. That motion is fitted into the replay
-(:mod:`popup.unseen`). A backlash narrower than :data:`PLAY_READINGS` of a reading
+(:mod:`popup.unseen`), for the nominal model and, in the first round, again for each of
+the :data:`UNSEEN_TOP` leading candidates, which are refitted on it (a compliance fitted
+without the missing effect takes part of a softening). A backlash narrower than :data:`PLAY_READINGS` of a reading
 (:attr:`ReplayProblem.encoder_width`) is below the quantisation of the replayed angle
 itself, and is not significant.
 
@@ -149,6 +151,8 @@ from .rules import (
     SCORE_THRESHOLD,
     SPIKE_SHARE,
     STABILITY_MARGIN,
+    UNSEEN_ALTERNATIONS,
+    UNSEEN_TOP,
     VARIANTS,
     Progress,
 )
@@ -179,4 +183,6 @@ __all__ = [
     "OFFSET_Z",
     "SPIKE_SHARE",
     "PLAY_READINGS",
+    "UNSEEN_TOP",
+    "UNSEEN_ALTERNATIONS",
 ]

@@ -161,7 +161,8 @@ def _improve(
                 added.append(s.effect)
                 fitted_params[s.effect] = list(s.fitted)
                 cand = s.apply(current)
-                cprob = prob.with_model(cand)
+                # refitted on the unseen motion of its own model, where it was fitted on it
+                cprob = (prob if s.unseen is None else prob.with_unseen_motion(*s.unseen)).with_model(cand)
                 if progress is not None:
                     progress({"round": rnd, "effect": "refit " + " + ".join(added), "done": 0, "total": 1})
                 current, cprob, ci = _refit_stable(cprob, added, fitted_params, max_iter)

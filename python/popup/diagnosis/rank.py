@@ -15,10 +15,10 @@ from ..exceptions import InputError
 from ..io import MeasuredRun
 from ..problem import Cancelled, ReplayProblem
 from ..unseen import fit_unseen_motion
-from .rules import FLOOR_MULTIPLE, JOINT_TOP, Progress, model_at_floor
+from .rules import FLOOR_MULTIPLE, JOINT_TOP, UNSEEN_TOP, Progress, model_at_floor
 from .results import Diagnosis, Suspect
 from .evidence import evidence_for
-from .candidate import left_out, rank_key, refit_jointly, screen_fit, try_effect
+from .candidate import left_out, rank_key, refit_jointly, refit_with_own_unseen, screen_fit, try_effect
 from .conclusion import round_conclusion
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -136,6 +136,10 @@ def _try(name: str, ev: Dict[str, Any], max_iter: int, also: Any, prior: Any) ->
     return lambda p: try_effect(p, name, ev, max_iter, also, prior)
 
 
+def _own(s: Suspect, ev: Dict[str, Any], max_iter: int) -> Callable[[ReplayProblem], Suspect]:
+    return lambda p: refit_with_own_unseen(p, s, ev, max_iter)
+
+
 def _refit(s: Suspect, ev: Dict[str, Any], max_iter: int, also: Any, prior: Any) -> Callable[[ReplayProblem], Suspect]:
     return lambda p: refit_jointly(p, s, ev, max_iter, also, prior)
 
@@ -243,7 +247,9 @@ def diagnose(
         done0 = len(with_start)
     else:
         full, done0 = set(todo), 0
-    total = done0 + len(full) + n_joint
+    # round one (nothing to refit jointly): the leading candidates on their own unseen motion
+    n_own = min(UNSEEN_TOP, len(full)) if not also and not prob.closed and prob.smoothing is not None else 0
+    total = done0 + len(full) + n_joint + n_own
     fitted = [n for n in todo if n in full]
     for name in fitted:
         evs.setdefault(name, evidence_for(name, cmp, prob))
@@ -260,6 +266,16 @@ def diagnose(
         refits = _each(prob, [(f"{suspects[i].effect} (joint refit)", _refit(suspects[i], evs[suspects[i].effect], max_iter, also, (starts or {}).get(suspects[i].effect)))
                               for i in top], progress, done0 + len(full), total)
         for i, r in zip(top, refits):
+            suspects[i] = r
+        suspects.sort(key=rank_key)
+    if n_own:
+        # the unseen servo motion fitted on the nominal model takes part of a missing
+        # softening: the leading candidates are refitted on the motion their own model gives
+        top = [i for i, s in enumerate(suspects[:n_own]) if s.tested and math.isfinite(s.score)]
+        total += len(top) - n_own  # the untested ones are not refitted
+        owns = _each(prob, [(f"{suspects[i].effect} (own unseen motion)", _own(suspects[i], evs[suspects[i].effect], max_iter)) for i in top],
+                     progress, total - len(top), total)
+        for i, r in zip(top, owns):
             suspects[i] = r
         suspects.sort(key=rank_key)
     if floor and todo:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -85,6 +85,11 @@ class Suspect:
         The effects already in the model that were refitted jointly with it (round 2 on):
         ``{effect: {name: [values]}}`` at this fit; :meth:`apply` sets them too, so the
         model it gives is the one ``error_after`` is of.
+    unseen : tuple or None
+        ``(compliance, q_corr)``: the unseen servo motion (:mod:`popup.unseen`) its own
+        model gives, when it was refitted with it rather than the nominal model's
+        (:func:`popup.diagnosis.candidate.refit_with_own_unseen`); the loop refits it on
+        that replay. ``None``: the round's replay.
     """
 
     effect: str
@@ -109,6 +114,7 @@ class Suspect:
     dt: float = math.nan
     fitted: List[str] = field(default_factory=list)
     refitted: Dict[str, Dict[str, List[float]]] = field(default_factory=dict)
+    unseen: Optional[Tuple[np.ndarray, np.ndarray]] = field(default=None, repr=False, compare=False)
 
     @property
     def relative_drop(self) -> float:
@@ -151,6 +157,7 @@ class Suspect:
             "evidence": {k: (_num(v) if isinstance(v, float) else v) for k, v in self.evidence.items()},
             "n_eff": _num(self.n_eff),
             "dt": _num(self.dt),
+            "unseen_compliance": None if self.unseen is None else [_num(x) for x in self.unseen[0]],
             "message": self.message,
         }
 

@@ -40,6 +40,17 @@ JOINT_TOP = 3
 jointly with them (the others keep their screened fit, earlier effects held)."""
 
 
+UNSEEN_TOP = 3
+"""In a round with no effect added yet, the number of best-ranked candidates refitted with
+the unseen servo motion (:mod:`popup.unseen`) their own model gives rather than the nominal
+model's (:func:`popup.diagnosis.candidate.refit_with_own_unseen`)."""
+
+
+UNSEEN_ALTERNATIONS = 2
+"""Most alternations of that refit: the unseen motion fitted to the candidate's model, then
+the candidate refitted on it, each kept while the likelihood rises."""
+
+
 SPIKE_SHARE = 0.5
 """Share of a channel's excess above which the unexplained error names its isolated spikes
 (:meth:`ReplayProblem.spikes`), for a channel above :data:`FLOOR_MULTIPLE` × its noise (a
