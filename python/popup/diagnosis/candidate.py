@@ -5,6 +5,7 @@ it significant (the package docs)."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 import numpy as np
@@ -186,13 +187,13 @@ class _Fitted:
 def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str, Any]], only: Optional[Sequence[str]], start: Optional[Dict[str, List[float]]],
                    extra_seeds: Optional[List[Dict[str, Any]]], max_iter: int, variant: str = "",
                    also: Optional[List[Tuple[fx.EffectParam, int]]] = None, stiffest: Optional[Dict[str, Any]] = None,
-                   dt: Optional[float] = None, seeds: bool = True, base: Optional[ReplayProblem] = None) -> Tuple[_Fitted, str]:
+                   dt: Optional[float] = None, seeds: bool = True, base: Optional[ReplayProblem] = None, k_extra: int = 0) -> Tuple[_Fitted, str]:
     """Fit one candidate (``structure``, the names ``only`` or every fitted one) from
     ``start`` and the effect's seeds (``seeds=False``: from ``start`` alone), with the
     entries of ``also`` refitted jointly; ``dt``: the step to use (default: from the
     structure's stability limit at ``stiffest``); ``base``: the problem (same run and
     model, another unseen motion) whose nominal replay the fit is scored against (default
-    ``prob``)."""
+    ``prob``), with ``k_extra`` more parameters counted than those fitted here."""
     model = prob.model
     m = model
     note = ""
@@ -251,7 +252,7 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
             cands.append(xh)
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
-    return _Fitted(name, variant, p, z_base, free_all, out, k=len(free)), note
+    return _Fitted(name, variant, p, z_base, free_all, out, k=len(free) + k_extra), note
 
 
 def _coordinate_seeds(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -489,10 +490,12 @@ def refit_with_own_unseen(prob: ReplayProblem, s: Suspect, ev: Dict[str, Any], m
     """Candidate ``s`` (fitted on ``prob``, whose replay holds the unseen servo motion the
     nominal model gives, :mod:`popup.unseen`) refitted on the unseen motion its own model
     gives: that motion fitted to the model with ``s``, ``s`` refitted on it from its fit
-    (its law, step and fitted names), up to :data:`UNSEEN_ALTERNATIONS` times while the
-    likelihood rises; every fit is scored against ``prob``'s nominal replay, so the scores
-    stay comparable with the other candidates'. The better fit is returned; one refitted
-    carries its motion (:attr:`Suspect.unseen`).
+    (its law, step and fitted names), up to :data:`UNSEEN_ALTERNATIONS` times while it ranks
+    better (:func:`rank_key`: never losing its significance). Every fit is scored against
+    ``prob``'s nominal replay, each joint compliance nonzero beyond ``prob``'s counted as a
+    fitted parameter, so the scores stay comparable with the other candidates'. The better
+    fit is returned; one refitted carries its motion (:attr:`Suspect.unseen`); ``s`` itself
+    is never changed.
 
     Why: the unseen motion is a servo compliance in series with the links' bending, so on
     the nominal model it takes part of any missing softening. On a popup-engine run with a
@@ -505,26 +508,27 @@ def refit_with_own_unseen(prob: ReplayProblem, s: Suspect, ev: Dict[str, Any], m
     var = _variant_named(s.effect, s.variant)
     struct = dict(STRUCTURE.get(s.effect) or {})
     struct.update((var or {}).get("structure") or {})
-    cur, last = s, np.asarray(prob.compliance, dtype=float)
+    cur, last_c, last_q = s, np.asarray(prob.compliance, dtype=float), np.asarray(prob.q_corr, dtype=float)
+    n_base = int(np.count_nonzero(prob.compliance))
+    note = ""
     for _ in range(UNSEEN_ALTERNATIONS):
         try:
             own = fit_unseen_motion(prob.with_model(cur.apply(prob.model)))
-            if np.array_equal(own.compliance, last):
+            if np.array_equal(own.compliance, last_c) and np.array_equal(own.q_corr, last_q):
                 break
-            last = np.asarray(own.compliance, dtype=float)
+            last_c, last_q = np.asarray(own.compliance, dtype=float), np.asarray(own.q_corr, dtype=float)
             pu = prob.with_unseen_motion(own.compliance, own.q_corr)
             start = {k: list(cur.params[k]) for k in cur.fitted if k in cur.params}
             f, _ = _fit_candidate(pu, s.effect, struct or None, list(cur.fitted) or None, start, None, max_iter, variant=s.variant,
-                                  dt=cur.dt, seeds=False, base=prob)
+                                  dt=cur.dt, seeds=False, base=prob, k_extra=max(0, int(np.count_nonzero(own.compliance)) - n_base))
         except Exception as e:  # noqa: BLE001 - the fit on the round's replay stands
-            cur.message = "; ".join(x for x in (cur.message, f"refit with its own unseen motion failed: {type(e).__name__}: {e}") if x)
+            note = f"refit with its own unseen motion failed: {type(e).__name__}: {e}"
             break
         j = f.suspect(ev, 0, s.message)
-        if not j.score > cur.score:
+        if not rank_key(j) < rank_key(cur):
             break
-        j.unseen = (np.asarray(own.compliance, dtype=float).copy(), np.asarray(own.q_corr, dtype=float).copy())
+        j.unseen = (last_c.copy(), last_q.copy())
         j.message = "; ".join(x for x in (s.message, "refitted with the unseen servo motion of its own model (compliance "
                                           + "/".join(f"{c:.2g}" for c in own.compliance) + f" rad/(N·m); score {s.score:.1f} → {j.score:.1f})") if x)
         cur = j
-    cur.n_rollouts = s.n_rollouts + prob.nfev - n0
-    return cur
+    return replace(cur, n_rollouts=s.n_rollouts + prob.nfev - n0, message="; ".join(x for x in (cur.message, note) if x))

@@ -234,12 +234,15 @@ def diagnose(
     # most of a round's cost, and the ranking's tail does not need them)
     quick: Dict[str, Suspect] = {}
     n_joint = min(JOINT_TOP, len(todo), screen or JOINT_TOP) if also and not joint else 0
+    # round one (nothing to refit jointly, not at the floor): the leading candidates are
+    # refitted on their own unseen motion
+    n_own = min(UNSEEN_TOP, len(todo)) if not also and not floor and not prob.closed and prob.smoothing is not None else 0
     if screen > 0 and starts:
         with_start = [n for n in todo if starts.get(n)]
         for name in with_start:
             evs[name] = evidence_for(name, cmp, prob)
         screened = _each(prob, [(f"{name} (screen)", _screen(name, evs[name], max_iter, starts[name])) for name in with_start],
-                         progress, 0, len(with_start) + min(screen, len(todo)) + n_joint)
+                         progress, 0, len(with_start) + min(screen, len(todo)) + n_joint + n_own)
         quick = dict(zip(with_start, screened))
         order = sorted(quick.values(), key=rank_key)
         full = {q.effect for q in order[:screen]} | {q.effect for q in order if q.significant} | {n for n in todo if n not in quick}
@@ -247,8 +250,6 @@ def diagnose(
         done0 = len(with_start)
     else:
         full, done0 = set(todo), 0
-    # round one (nothing to refit jointly): the leading candidates on their own unseen motion
-    n_own = min(UNSEEN_TOP, len(full)) if not also and not prob.closed and prob.smoothing is not None else 0
     total = done0 + len(full) + n_joint + n_own
     fitted = [n for n in todo if n in full]
     for name in fitted:
@@ -271,12 +272,10 @@ def diagnose(
     if n_own:
         # the unseen servo motion fitted on the nominal model takes part of a missing
         # softening: the leading candidates are refitted on the motion their own model gives
-        top = [i for i, s in enumerate(suspects[:n_own]) if s.tested and math.isfinite(s.score)]
-        total += len(top) - n_own  # the untested ones are not refitted
-        owns = _each(prob, [(f"{suspects[i].effect} (own unseen motion)", _own(suspects[i], evs[suspects[i].effect], max_iter)) for i in top],
-                     progress, total - len(top), total)
-        for i, r in zip(top, owns):
-            suspects[i] = r
+        # (an untested one comes back as it is)
+        owns = _each(prob, [(f"{x.effect} (own unseen motion)", _own(x, evs[x.effect], max_iter)) for x in suspects[:n_own]],
+                     progress, total - n_own, total)
+        suspects[:n_own] = owns
         suspects.sort(key=rank_key)
     if floor and todo:
         why = (f"not significant: the model is at its floor (systematic error {prob.floor_error(per0):.3g} above the noise "
