@@ -40,10 +40,11 @@ Where it is used: :func:`popup.diagnose` and :func:`popup.improve`, on the nomin
 and again after each effect the loop adds (the torque changes with the model). In a round
 with no effect added yet, the :data:`popup.diagnosis.rules.UNSEEN_TOP` leading candidates
 are also refitted on the motion their own model gives
-(:func:`popup.diagnosis.candidate.refit_with_own_unseen`), scored against the same nominal
-replay: fitted on the nominal model, the compliance takes part of a missing softening (a
-near-threshold wrinkling on popup's engine was pulled to another basin and a payload ranked
-first). The
+(:func:`popup.diagnosis.candidate.refit_with_own_unseen`, from the nominal model's motion
+and from none), scored against the same nominal replay: fitted on the nominal model, the
+compliance takes part of a missing softening (a near-threshold wrinkling on popup's engine
+was pulled to another basin and a payload ranked first), and a fit started from it stays in
+its basin (a 0.4 g payload and a wrinkling each ranked below the other). The
 comparison (:func:`popup.compare`) and :func:`popup.fit_params` replay the encoder as
 smoothed. On MuJoCo runs with 12-bit encoders and servos of 1.8e6 N·m/rad (compliance
 5.6e-7 rad/(N·m)) the fitted compliances are 0.13-2.9 × that, median 1.01 ×, and the replays

@@ -74,8 +74,9 @@ none significant.
 yields to the links' ringing by a fraction of a step (a servo's finite stiffness) never
 changes its reading, and the replay holds it still. That motion is fitted into the replay
 (:mod:`popup.unseen`), for the nominal model and, in the first round, again for each of
-the :data:`UNSEEN_TOP` leading candidates, which are refitted on it (a compliance fitted
-without the missing effect takes part of a softening). A backlash narrower than :data:`PLAY_READINGS` of a reading
+the :data:`UNSEEN_TOP` leading candidates, which are refitted on it, starting both from the
+nominal model's motion and from none (a compliance fitted without the missing effect takes
+part of a softening, and a fit started beside it stays in its basin). A backlash narrower than :data:`PLAY_READINGS` of a reading
 (:attr:`ReplayProblem.encoder_width`) is below the quantisation of the replayed angle
 itself, and is not significant.
 

@@ -43,7 +43,8 @@ jointly with them (the others keep their screened fit, earlier effects held)."""
 UNSEEN_TOP = 3
 """In a round with no effect added yet, the number of best-ranked candidates refitted with
 the unseen servo motion (:mod:`popup.unseen`) their own model gives rather than the nominal
-model's (:func:`popup.diagnosis.candidate.refit_with_own_unseen`)."""
+model's, along two paths: from the nominal model's motion and from none
+(:func:`popup.diagnosis.candidate.refit_with_own_unseen`)."""
 
 
 UNSEEN_ALTERNATIONS = 2
