@@ -545,6 +545,37 @@ def test_a_candidate_is_also_refitted_on_the_replay_without_unseen_motion(tmp_pa
     assert best.error_after < 0.5 * d.nominal_error, (best.error_after, d.nominal_error)
 
 
+def test_every_candidate_is_refitted_on_the_replay_without_unseen_motion(tmp_path):
+    """The compliance fitted on the nominal model can hold a candidate in its basin at any
+    rank, not only among the leading ones. On seed 443's popup-engine torsion draw (link 1
+    only, k_t 12 110 N·m/rad, near its detection threshold; rigid joints) the nominal's
+    compliance of 1.5e-6 rad/(N·m) on joint 1 stands in for the torsion: beside it every
+    torsion fit goes to its stiffness cap, worse than the nominal, and torsion ranked below
+    three effects that are not there, out of reach of ``refit_with_own_unseen``.
+    ``screen_without_unseen`` refits every candidate from its fit on the replay without the
+    motion: torsion ranks first, at its true stiffness, with no compliance."""
+    from popup.diagnosis.rank import diagnose
+    from popup.diagnosis.rules import UNSEEN_TOP
+
+    sp = F.family_specs("torsion", "popup", 1, 443)[0]
+    path, truth = F.make_run(sp, tmp_path)
+    assert truth["level"] == "near"
+    run = _read(path)
+    others = ["payload_mass", "wrinkling", "air_drag"]
+    assert len(others) >= UNSEEN_TOP
+    seen = []
+    d = diagnose(run.model(), run, effects=["torsion", *others], threads=1, progress=seen.append)
+    assert d.problem.compliance[0] > 0  # the nominal's motion holds a compliance on joint 1
+    labels = [x["effect"] for x in seen]
+    assert sorted(x for x in labels if x.endswith("(without unseen motion)")) == sorted(f"{e} (without unseen motion)" for e in ["torsion", *others])
+    assert len(labels) == 4 + 4 + UNSEEN_TOP and {x["total"] for x in seen} == {len(labels)}
+    best = d.best
+    assert best is not None and best.effect == "torsion", [(s.effect, s.score) for s in d.suspects]
+    assert best.params["k_t"][0] == pytest.approx(truth["effects"]["torsion"]["k_t"][0], rel=0.05), best.params
+    assert best.unseen is not None and not np.any(best.unseen[0])
+    assert best.error_after < 0.5 * d.nominal_error, (best.error_after, d.nominal_error)
+
+
 # ---------------------------------------------------------------------------- the encoder floor
 
 

@@ -38,13 +38,16 @@ encoder get nothing.
 
 Where it is used: :func:`popup.diagnose` and :func:`popup.improve`, on the nominal model
 and again after each effect the loop adds (the torque changes with the model). In a round
-with no effect added yet, the :data:`popup.diagnosis.rules.UNSEEN_TOP` leading candidates
-are also refitted on the motion their own model gives
+with no effect added yet, every candidate is refitted from its fit on the replay without
+the motion (:func:`popup.diagnosis.candidate.screen_without_unseen`), and the
+:data:`popup.diagnosis.rules.UNSEEN_TOP` leading candidates after that are also refitted on
+the motion their own model gives
 (:func:`popup.diagnosis.candidate.refit_with_own_unseen`, from the nominal model's motion
 and from none), scored against the same nominal replay: fitted on the nominal model, the
 compliance takes part of a missing softening (a near-threshold wrinkling on popup's engine
 was pulled to another basin and a payload ranked first), and a fit started from it stays in
-its basin (a 0.4 g payload and a wrinkling each ranked below the other). The
+its basin (a 0.4 g payload and a wrinkling each ranked below the other; a near-threshold
+torsion, held at its stiffness cap, ranked 9th). The
 comparison (:func:`popup.compare`) and :func:`popup.fit_params` replay the encoder as
 smoothed. On MuJoCo runs with 12-bit encoders and servos of 1.8e6 N·m/rad (compliance
 5.6e-7 rad/(N·m)) the fitted compliances are 0.13-2.9 × that, median 1.01 ×, and the replays

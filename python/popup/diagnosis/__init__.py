@@ -76,7 +76,9 @@ changes its reading, and the replay holds it still. That motion is fitted into t
 (:mod:`popup.unseen`), for the nominal model and, in the first round, again for each of
 the :data:`UNSEEN_TOP` leading candidates, which are refitted on it, starting both from the
 nominal model's motion and from none (a compliance fitted without the missing effect takes
-part of a softening, and a fit started beside it stays in its basin). A backlash narrower than :data:`PLAY_READINGS` of a reading
+part of a softening, and a fit started beside it stays in its basin); before that, every
+candidate is refitted from its fit on the replay without any motion, so that one held at
+any rank by the nominal's compliance can still lead. A backlash narrower than :data:`PLAY_READINGS` of a reading
 (:attr:`ReplayProblem.encoder_width`) is below the quantisation of the replayed angle
 itself, and is not significant.
 

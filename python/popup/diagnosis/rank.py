@@ -8,6 +8,8 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
+import numpy as np
+
 from .. import effects as fx
 from .. import estimate as est
 from ..compare import compare
@@ -18,7 +20,7 @@ from ..unseen import fit_unseen_motion
 from .rules import FLOOR_MULTIPLE, JOINT_TOP, UNSEEN_TOP, Progress, model_at_floor
 from .results import Diagnosis, Suspect
 from .evidence import evidence_for
-from .candidate import left_out, rank_key, refit_jointly, refit_with_own_unseen, screen_fit, try_effect
+from .candidate import left_out, rank_key, refit_jointly, refit_with_own_unseen, screen_fit, screen_without_unseen, try_effect
 from .conclusion import round_conclusion
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -140,6 +142,10 @@ def _own(s: Suspect, ev: Dict[str, Any], max_iter: int) -> Callable[[ReplayProbl
     return lambda p: refit_with_own_unseen(p, s, ev, max_iter)
 
 
+def _bare(s: Suspect, ev: Dict[str, Any], max_iter: int) -> Callable[[ReplayProblem], Suspect]:
+    return lambda p: screen_without_unseen(p, s, ev, max_iter)
+
+
 def _refit(s: Suspect, ev: Dict[str, Any], max_iter: int, also: Any, prior: Any) -> Callable[[ReplayProblem], Suspect]:
     return lambda p: refit_jointly(p, s, ev, max_iter, also, prior)
 
@@ -237,12 +243,15 @@ def diagnose(
     # round one (nothing to refit jointly, not at the floor): the leading candidates are
     # refitted on their own unseen motion
     n_own = min(UNSEEN_TOP, len(todo)) if not also and not floor and not prob.closed and prob.smoothing is not None else 0
+    # and where the nominal's motion holds a compliance, every candidate is first refitted
+    # from its fit on the replay without it (screen_without_unseen)
+    n_bare = len(todo) if n_own and np.count_nonzero(prob.compliance) else 0
     if screen > 0 and starts:
         with_start = [n for n in todo if starts.get(n)]
         for name in with_start:
             evs[name] = evidence_for(name, cmp, prob)
         screened = _each(prob, [(f"{name} (screen)", _screen(name, evs[name], max_iter, starts[name])) for name in with_start],
-                         progress, 0, len(with_start) + min(screen, len(todo)) + n_joint + n_own)
+                         progress, 0, len(with_start) + min(screen, len(todo)) + n_joint + n_bare + n_own)
         quick = dict(zip(with_start, screened))
         order = sorted(quick.values(), key=rank_key)
         full = {q.effect for q in order[:screen]} | {q.effect for q in order if q.significant} | {n for n in todo if n not in quick}
@@ -250,7 +259,7 @@ def diagnose(
         done0 = len(with_start)
     else:
         full, done0 = set(todo), 0
-    total = done0 + len(full) + n_joint + n_own
+    total = done0 + len(full) + n_joint + n_bare + n_own
     fitted = [n for n in todo if n in full]
     for name in fitted:
         evs.setdefault(name, evidence_for(name, cmp, prob))
@@ -268,6 +277,10 @@ def diagnose(
                               for i in top], progress, done0 + len(full), total)
         for i, r in zip(top, refits):
             suspects[i] = r
+        suspects.sort(key=rank_key)
+    if n_bare:
+        suspects = _each(prob, [(f"{x.effect} (without unseen motion)", _bare(x, evs[x.effect], max_iter)) for x in suspects],
+                         progress, total - n_own - n_bare, total)
         suspects.sort(key=rank_key)
     if n_own:
         # the unseen servo motion fitted on the nominal model takes part of a missing

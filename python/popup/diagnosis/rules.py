@@ -44,7 +44,9 @@ UNSEEN_TOP = 3
 """In a round with no effect added yet, the number of best-ranked candidates refitted with
 the unseen servo motion (:mod:`popup.unseen`) their own model gives rather than the nominal
 model's, along two paths: from the nominal model's motion and from none
-(:func:`popup.diagnosis.candidate.refit_with_own_unseen`)."""
+(:func:`popup.diagnosis.candidate.refit_with_own_unseen`). They are taken after every
+candidate has been refitted from its fit on the replay without any motion
+(:func:`popup.diagnosis.candidate.screen_without_unseen`)."""
 
 
 UNSEEN_ALTERNATIONS = 2
