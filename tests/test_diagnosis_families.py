@@ -576,6 +576,37 @@ def test_every_candidate_is_refitted_on_the_replay_without_unseen_motion(tmp_pat
     assert best.error_after < 0.5 * d.nominal_error, (best.error_after, d.nominal_error)
 
 
+# about 10 minutes of one core: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
+def test_a_pair_neither_of_which_is_significant_alone_is_added_together(tmp_path):
+    """Seed 533's first MuJoCo pair: a sensor delay (imu 23, mocap 29, torque 13 ms) and
+    two-segment links (root 2k, middle k/2). Alone, the delay fits the truth's lags and
+    raises the error (the bending law moves the phase of tau1 and the vertical IMU
+    channels the other way), and the bending law alone explains nothing: no candidate is
+    significant in round 1. The pair step (``_pair_from_none``) fits the bending law
+    jointly with the delay from its seeds and adds both in round 1; the error falls to the
+    floor and the delays come out at the truth's."""
+    from popup.diagnosis.rules import AT_FLOOR, MIN_EXPLAINED
+
+    sp = F.family_specs("pairs", "mujoco", 1, 533)[0]
+    path, truth = F.make_run(sp, tmp_path)
+    assert sorted(truth["hidden"]) == ["higher_bending_modes", "sensor_delay"]
+    run = _read(path)
+    h = popup.improve(run.model(), run, effects=["sensor_delay", "higher_bending_modes"], max_rounds=2, threads=1)
+    d1 = h.diagnoses[0]
+    assert d1.best is None  # neither alone: the pair step is what finds them
+    delay = next(s for s in d1.suspects if s.effect == "sensor_delay")
+    assert delay.score > 1000 and delay.error_after > d1.nominal_error * (1 - MIN_EXPLAINED) ** 0.5, (delay.score, delay.error_after)
+    st = h.steps[1]
+    assert st.round == 1 and sorted(st.effects) == ["higher_bending_modes", "sensor_delay"], [(x.round, x.effects) for x in h.steps]
+    assert st.error < 0.2 * h.steps[0].error and st.error <= 2 * AT_FLOOR, (st.error, h.steps[0].error)
+    got = st.params["sensor_delay"]
+    for g in ("imu", "mocap", "torque"):
+        assert got[g][0] == pytest.approx(truth["effects"]["sensor_delay"][g], abs=0.002), (g, got)
+    assert "added the pair" in h.conclusion.lower() and "neither of which was significant alone" in h.conclusion, h.conclusion
+    assert any("a pair with" in n for n in h.notes), h.notes
+
+
 # ---------------------------------------------------------------------------- the encoder floor
 
 

@@ -110,7 +110,14 @@ link-side inertia and contact damping); for each of the :data:`PAIR_HINTS` best 
 that pass the likelihood threshold beside it without being significant, the nominal model
 with that candidate is diagnosed over the candidates significant in some round, each
 fitted jointly with it from its seeds, and the best pair replaces the effect on the same
-test. The swap and the base law offer only
+test. *Pair from none*: when nothing was significant in round 1 and the error is above the
+floor, two effects may each replay worse alone than neither (a sensor delay beside a
+bending law that moves the phase of the channels it shares the other way); for each of the
+:data:`PAIR_HINTS` best candidates that pass the likelihood threshold, the nominal model
+with it is diagnosed over the other candidates that passed it, each fitted jointly from its
+seeds, and the best pair is added in round 1 when it beats the nominal model on the same
+test and explains at least :data:`MIN_EXPLAINED` of its systematic error, as one effect
+must. The swap and the base law offer only
 candidates some round found significant (an effect another stood in for explained much of
 the same error when that one was chosen), each (effect, candidate) pair once; what they
 tried and why it was or was not kept is in ``History.notes``. Each history step names its

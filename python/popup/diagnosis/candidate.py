@@ -502,8 +502,11 @@ def _on_motion(prob: ReplayProblem, s: Suspect, cur: Suspect, c: np.ndarray, q: 
                           dt=cur.dt, seeds=seeds, base=prob, k_extra=max(0, int(np.count_nonzero(c)) - n_base))
     j = f.suspect(ev, 0, s.message)
     j.unseen = (np.asarray(c, dtype=float).copy(), np.asarray(q, dtype=float).copy())
-    what = ("compliance " + "/".join(f"{v:.2g}" for v in c) + " rad/(N·m)") if np.any(c != 0) else "none"
-    j.message = "; ".join(x for x in (s.message, f"refitted with the unseen servo motion of its own model ({what}; score {s.score:.1f} → {j.score:.1f})") if x)
+    if np.any(c != 0):
+        what = "refitted with the unseen servo motion of its own model (compliance " + "/".join(f"{v:.2g}" for v in c) + " rad/(N·m); "
+    else:
+        what = "refitted on the replay without unseen servo motion ("
+    j.message = "; ".join(x for x in (s.message, f"{what}score {s.score:.1f} → {j.score:.1f})") if x)
     return j
 
 

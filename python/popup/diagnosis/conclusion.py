@@ -96,10 +96,12 @@ def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) 
         if st.removed:
             parts.append(f"removed {st.removed} again (with {', '.join(st.effects)} refitted it explains nothing more; error {prev.error:.3g} → {st.error:.3g})")
             continue
-        e = st.effects[-1]
-        vals = st.params.get(e, {})
-        ci = st.ci95.get(e, {})
-        ptxt = fmt_params({k: v for k, v in vals.items() if k in ci}, ci) or fmt_params(vals, {})
+        new = [x for x in st.effects if x not in prev.effects] or st.effects[-1:]
+        e = new[-1]
+
+        def ptxt_of(x: str) -> str:
+            vals, ci = st.params.get(x, {}), st.ci95.get(x, {})
+            return fmt_params({k: v for k, v in vals.items() if k in ci}, ci) or fmt_params(vals, {})
         drop = 1.0 - st.error / prev.error if prev.error > 0 else 0.0
         moved = sorted(((c, prev.channel_error.get(c, math.nan), st.channel_error.get(c, math.nan)) for c in st.channel_error),
                        key=lambda x: -(x[1] - x[2]) if math.isfinite(x[1] - x[2]) else 0.0)[:3]
@@ -107,7 +109,12 @@ def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) 
         reset = f", with {st.law_reset} back at its base law (its richer variant had stood in for {e})" if st.law_reset else ""
         fall = (f"the systematic error fell from {prev.error:.3g} to {st.error:.3g} noise units ({100 * drop:.0f} % less)" if st.error < prev.error
                 else f"the systematic error went from {prev.error:.3g} to {st.error:.3g} noise units")
-        parts.append(f"added {e} ({ptxt}){reset}: {fall}" + (f"; on {ch}" if ch else ""))
+        if len(new) > 1:
+            what = (f"added the pair {' and '.join(new)} ({'; '.join(f'{x}: {ptxt_of(x)}' for x in new)}), neither of which was "
+                    "significant alone")
+        else:
+            what = f"added {e} ({ptxt_of(e)})"
+        parts.append(f"{what}{reset}: {fall}" + (f"; on {ch}" if ch else ""))
     last = h.steps[-1]
     d_last = h.diagnoses[-1] if h.diagnoses and h.diagnoses[-1].problem is not None and h.diagnoses[-1].problem.model is last.model else None
     n_added = sum(1 for st in h.steps[1:] if not st.removed)

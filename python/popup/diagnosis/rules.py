@@ -65,7 +65,9 @@ PAIR_HINTS = 2
 systematic error is left with nothing significant, it is tried replaced by a pair, one of
 which is among this many best candidates that pass the likelihood threshold beside it but
 explain too little of what is left to be significant (each hint costs a joint fit of every
-candidate significant in some round)."""
+candidate significant in some round). With nothing added (nothing significant in round 1),
+the same number of best candidates that pass the likelihood threshold are each tried with
+each other one that does (``_pair_from_none``)."""
 
 
 OFFSET_SHARE = 0.5
