@@ -37,6 +37,7 @@ Prints a table and writes ``OUT/summary.json``. Asserts nothing.
 from __future__ import annotations
 
 import argparse
+import gzip
 import hashlib
 import json
 import math
@@ -367,22 +368,41 @@ def diagnosis_version(commit: Optional[str], root: Optional[Path] = None) -> Opt
 
 
 def cached_rows(dirs: Sequence[str]) -> List[Dict[str, Any]]:
-    """Every result cached under ``dirs`` (``DIR/results/*.json``), each re-classified from
-    its stored output with this script's :func:`classify`."""
+    """Every result cached under ``dirs`` (``DIR/results/*.json``, or ``*.json.gz`` as
+    :func:`archive` keeps them), each re-classified from its stored output with this
+    script's :func:`classify`."""
     rows: List[Dict[str, Any]] = []
     for d in dirs:
-        files = sorted(Path(d).glob("results/*.json"))
+        files = sorted([*Path(d).glob("results/*.json"), *Path(d).glob("results/*.json.gz")])
         if not files:
             print(f"note: {d} has no results/*.json")
         for f in files:
             try:
-                row = json.loads(f.read_text())
-            except ValueError:
+                row = json.loads(gzip.decompress(f.read_bytes()) if f.suffix == ".gz" else f.read_text())
+            except (ValueError, OSError):
                 print(f"note: {f} is not JSON (skipped)")
                 continue
             row["outcome"] = classify(row["truth"], {**row["diagnosis"], "json": row.get("json")})
             rows.append(row)
     return rows
+
+
+def archive(dirs: Sequence[str], dest: str) -> int:
+    """Keep the results cached under ``dirs`` in ``dest`` (``DEST/<dir name>/results/<run>.json.gz``,
+    the run folders left out), for ``--pool`` in a later clone: ``out/`` is not kept, and
+    a rate is claimed over results of one diagnosis version whatever session made them.
+    An archived result is not overwritten. Returns the number written."""
+    n = 0
+    for d in dirs:
+        for f in sorted(Path(d).glob("results/*.json")):
+            to = Path(dest) / Path(d).name / "results" / (f.name + ".gz")
+            if to.is_file():
+                continue
+            to.parent.mkdir(parents=True, exist_ok=True)
+            to.write_bytes(gzip.compress(f.read_bytes(), mtime=0))
+            n += 1
+    print(f"archived {n} new result(s) from {len(dirs)} folder(s) in {dest}")
+    return n
 
 
 def pool(dirs: Sequence[str], engines: Sequence[str], by_version: bool = False) -> int:
@@ -440,8 +460,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     "(re-classified with this script; e.g. several seeds pooled)")
     ap.add_argument("--by-version", action="store_true", help="with --pool: one set of tables per diagnosis version (the content of "
                     f"{', '.join(DIAGNOSIS_PATHS)} at each result's commit), so rates are claimed on one code version")
+    ap.add_argument("--archive", nargs="+", metavar="DIR", help="only keep the results cached in these --out folders, gzipped, "
+                    "under benchmarks/results/<folder>/results/ (or --archive-to), to be pooled from a later clone")
+    ap.add_argument("--archive-to", default=str(Path(__file__).resolve().parent / "results"), help="where --archive keeps them")
     a = ap.parse_args(argv)
 
+    if a.archive:
+        archive(a.archive, a.archive_to)
+        return 0
     if a.pool:
         return pool(a.pool, ["popup", "mujoco"] if a.engine == "both" else [a.engine], by_version=a.by_version)
     engines = ["popup", "mujoco"] if a.engine == "both" else [a.engine]

@@ -400,6 +400,28 @@ def test_report_only_tables_the_cache_and_generates_nothing(tmp_path, capsys):
     assert "1 cached result" in capsys.readouterr().out
 
 
+def test_archived_results_pool_as_the_cache_did_and_are_never_overwritten(tmp_path, capsys):
+    eff = {"kind": "effect", "family": "payload_mass", "hidden": ["payload_mass"], "engine": "mujoco", "style": "lab"}
+    out = tmp_path / "fam_x7"
+    (out / "results").mkdir(parents=True)
+    for i, (first, ok) in enumerate([("payload_mass", True), ("torsion", True)]):
+        js = _js([([], 10.0), ([first], 0.2)], [(first, ok)])
+        row = {"run": f"r{i}", "truth": eff, "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0}, "json": js, "commit": "abc"}
+        (out / "results" / f"mujoco-payload_mass-{i:03d}.json").write_text(json.dumps(row))
+    dest = tmp_path / "kept"
+    assert bench.main(["--archive", str(out), "--archive-to", str(dest)]) == 0
+    kept = sorted((dest / "fam_x7" / "results").iterdir())
+    assert [k.name for k in kept] == ["mujoco-payload_mass-000.json.gz", "mujoco-payload_mass-001.json.gz"]
+    before = [k.read_bytes() for k in kept]
+    got, want = bench.cached_rows([str(dest / "fam_x7")]), bench.cached_rows([str(out)])
+    assert [r["outcome"] for r in got] == [r["outcome"] for r in want] and [r["outcome"]["ok"] for r in got] == [True, False]
+    # a second archive of a changed cache keeps what was archived
+    (out / "results" / "mujoco-payload_mass-000.json").write_text("{}")
+    assert bench.archive([str(out)], str(dest)) == 0
+    assert [k.read_bytes() for k in kept] == before
+    capsys.readouterr()
+
+
 def test_diagnosis_version_pools_commits_that_differ_only_outside_the_diagnosis(tmp_path, capsys):
     import subprocess
 
