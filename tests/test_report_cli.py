@@ -193,3 +193,52 @@ def test_a_run_at_its_floor_is_answered_without_fitting_and_says_why(tmp_path):
     assert r2.returncode == 0, r2.stderr
     d2 = json.loads(r2.stdout)
     assert [s["tested"] for s in d2["suspects"]] == [True] and d2["history"][-1]["effects"] == []
+
+
+def test_history_names_a_pair_added_from_none():
+    """The pair-from-none step (nothing significant in round 1, two effects added together
+    in round 1) in the table, the conclusion (each member's values, that neither was
+    significant alone) and the JSON."""
+    from popup.diagnosis import History, HistoryStep
+    from popup.diagnosis.conclusion import conclude as _conclude
+
+    ch = {"tau1": 1.0}
+    steps = [
+        HistoryStep([], {}, 8.39, {"tau1": 12.0}),
+        HistoryStep(["sensor_delay", "higher_bending_modes"], {"sensor_delay": {"torque": [0.0128]}, "higher_bending_modes": {"k_scale": [1.3, 1.3]}},
+                    0.9, ch, round=1),
+    ]
+    h = History(steps, [], "")
+    assert list(h.to_pandas()["change"]) == ["", "+ sensor_delay + higher_bending_modes"]
+    text = _conclude(h, 4)
+    assert ("Added the pair sensor_delay and higher_bending_modes (sensor_delay: torque=0.0128; higher_bending_modes: k_scale=1.3/1.3), "
+            "neither of which was significant alone: the systematic error fell from 8.39 to 0.9 noise units") in text, text
+    js = h.to_dict()["history"][-1]
+    assert (js["effects"], js["round"], js["removed"], js["swapped_in"]) == (["sensor_delay", "higher_bending_modes"], 1, "", "")
+
+
+def test_a_runner_up_within_the_threshold_is_said_to_be_indistinguishable():
+    """Two significant candidates whose scores (BIC gains over the same nominal) differ by
+    less than the threshold: the round's and the history's conclusions say the run cannot
+    tell them apart; one further apart, or not significant, is not named."""
+    from popup.diagnosis import Diagnosis, History, HistoryStep, Suspect
+    from popup.diagnosis.conclusion import conclude as _conclude
+    from popup.diagnosis.conclusion import round_conclusion, tied_with_best
+    from popup.diagnosis.rules import SCORE_THRESHOLD
+
+    def sus(name, sig, score, after):
+        return Suspect(name, sig, score, {}, {}, 1.0, after, {}, {})
+
+    best = sus("payload_mass", True, 11450.0, 0.153)
+    near = sus("wrinkling", True, 11450.0 - 0.9 * SCORE_THRESHOLD, 0.162)
+    far = sus("torsion", True, 11450.0 - 1.1 * SCORE_THRESHOLD, 0.2)
+    weak = sus("air_drag", False, 11449.0, 0.9)
+    d = Diagnosis([best, near, far, weak], 1.0, {"tau1": 1.0}, None, True, "")
+    assert [s.effect for s in tied_with_best(d)] == ["wrinkling"]
+    text = round_conclusion(d)
+    assert "this run cannot tell it from wrinkling (score" in text and "torsion" not in text and "air_drag" not in text, text
+    ch = {"tau1": 1.0}
+    steps = [HistoryStep([], {}, 1.0, ch), HistoryStep(["payload_mass"], {"payload_mass": {"delta_kg": [0.0015]}}, 0.153, ch, round=1)]
+    assert "payload_mass, added first: this run cannot tell it from wrinkling" in _conclude(History(steps, [d], ""), 4)
+    d2 = Diagnosis([best, far, weak], 1.0, {"tau1": 1.0}, None, True, "")
+    assert tied_with_best(d2) == [] and "cannot tell" not in round_conclusion(d2) and "cannot tell" not in _conclude(History(steps, [d2], ""), 4)

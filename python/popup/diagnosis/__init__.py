@@ -44,6 +44,10 @@ motor torques, of the error on those channels: :func:`popup.effects.acts_only_on
 and it is confirmed on the held-out samples (the likelihood ratio there is positive and the
 held-out error falls), unless it does not act on them at all (a torque limit reached only in
 training blocks: the held-out samples can neither confirm nor refute it; its message says so).
+Two significant candidates whose scores differ by less than :data:`SCORE_THRESHOLD` (both
+are BIC gains over the same nominal model, so the difference is the evidence for one over
+the other) are ones the run cannot tell apart, and the conclusions say so
+(:func:`popup.diagnosis.conclusion.tied_with_best`): the best is still added.
 
 **Refinement.** A significant effect is also fitted in its richer variants
 (:data:`VARIANTS`: friction with Stribeck terms, three segments for bending, a centre-of-mass

@@ -8,8 +8,26 @@ from typing import Dict, List, Mapping, Optional
 
 from ..problem import SPIKE_SIGMA, ReplayProblem
 from ..results import UNITS
-from .rules import AT_FLOOR, FLOOR_MULTIPLE, OFFSET_SHARE, SPIKE_SHARE
-from .results import Diagnosis, History, final_problem, fmt_params, step_at_floor
+from .rules import AT_FLOOR, FLOOR_MULTIPLE, OFFSET_SHARE, SCORE_THRESHOLD, SPIKE_SHARE
+from .results import Diagnosis, History, Suspect, final_problem, fmt_params, step_at_floor
+
+
+def tied_with_best(d: Diagnosis) -> List[Suspect]:
+    """The significant candidates of ``d`` other than its best whose score is within
+    :data:`SCORE_THRESHOLD` of the best's: both scores are BIC gains over the same nominal
+    model, so their difference is the evidence for the best over each, and below the
+    threshold the run does not tell them apart."""
+    b = d.best
+    if b is None or not math.isfinite(b.score):
+        return []
+    return [s for s in d.significant if s is not b and s.effect != b.effect and math.isfinite(s.score) and b.score - s.score < SCORE_THRESHOLD]
+
+
+def _tie_text(b: Suspect, ties: List[Suspect]) -> str:
+    return ("this run cannot tell it from " + ", ".join(
+        f"{s.effect} (score {s.score:.5g} vs {b.score:.5g}, less than the threshold {SCORE_THRESHOLD:g} apart; error after "
+        f"{s.error_after:.3g} vs {b.error_after:.3g} noise units)" for s in ties)
+        + ": a run that excites them differently would separate them")
 
 
 def round_conclusion(d: Diagnosis) -> str:
@@ -20,6 +38,9 @@ def round_conclusion(d: Diagnosis) -> str:
             f"{b.effect}{f' ({b.variant})' if b.variant else ''} explains the most: adding it is predicted to take the systematic error from "
             f"{b.error_before:.3g} to {b.error_after:.3g} noise units ({100 * b.explained:.0f} % of it; held out {b.validation_before:.3g} → {b.validation_after:.3g})"
         )
+        ties = tied_with_best(d)
+        if ties:
+            parts.append(_tie_text(b, ties))
     elif d.nominal_error <= AT_FLOOR:
         parts.append(f"at the noise floor (systematic error {d.nominal_error:.3g} noise units): no library effect is significant")
     elif d.model_at_floor:
@@ -145,6 +166,12 @@ def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) 
         left += (" (the replay includes the motor joints' motion inside one encoder reading, a servo compliance of "
                  + "/".join(f"{c:.2g}" for c in last.unseen_compliance) + " rad/(N·m) per joint: popup.unseen)")
     parts.append(left)
+    if h.diagnoses and len(h.steps) > 1:
+        d0, first = h.diagnoses[0], h.steps[1]
+        b0 = d0.best
+        ties = [t for t in tied_with_best(d0) if t.effect not in last.effects]
+        if b0 is not None and ties and b0.effect in first.effects and not first.removed:
+            parts.append(f"{b0.effect}, added first: " + _tie_text(b0, ties))
     untested = sorted({f"{s.effect} ({s.message})" for d in h.diagnoses if not d.model_at_floor for s in d.untested})
     if untested:
         parts.append("the ranking is incomplete: " + "; ".join(untested))

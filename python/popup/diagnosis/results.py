@@ -477,8 +477,9 @@ class History:
         pd = _pd()
         rows = []
         for i, s in enumerate(self.steps):
+            new = " + ".join([e for e in s.effects if i and e not in self.steps[i - 1].effects] or s.effects[-1:])
             change = (f"{s.removed} → {s.swapped_in}" if s.swapped_in else f"− {s.removed}" if s.removed
-                      else (f"+ {s.effects[-1]} ({s.law_reset} at its base law)" if s.law_reset else f"+ {s.effects[-1]}") if s.effects and i else "")
+                      else (f"+ {new} ({s.law_reset} at its base law)" if s.law_reset else f"+ {new}") if s.effects and i else "")
             row: Dict[str, Any] = {"step": i, "round": s.round, "change": change, "effects": " + ".join(s.effects) or "nominal", "error": s.error,
                                    "validation_error": s.validation_error}
             row.update({f"noise× {c}": v for c, v in s.channel_error.items()})
