@@ -809,6 +809,27 @@ def test_variants_of_one_effect_are_combined_where_the_truth_has_both(tmp_path):
     assert s.error_after < 0.3, s.error_after
 
 
+# a minute of fitting: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
+def test_a_much_stiffer_root_is_found_where_the_equal_split_explains_nothing(tmp_path):
+    """Links whose root spring is 5.8 × the outer one (the popup family run of seed 551,
+    shortened to 6 s): fitted with equal springs, no pair of stiffnesses mimics it (the fit
+    runs to k_scale's bound and scores below zero), so a root split tried only after a
+    significant equal split was never tried, and the 13.5 s run added a payload instead.
+    The split is tried anyway, from starts of its own, and lands on the truth."""
+    sp = F.family_specs("higher_bending_modes", "popup", 1, 551, duration=6.0)[0]
+    truth = sp.effects["higher_bending_modes"]
+    assert truth["root_ratio"][0] > 5.0 and truth["segments"] == [2.0, 2.0], truth  # the draw this test is about
+    path, _ = F.make_run(sp, tmp_path)
+    run = _read(path)
+    d = popup.diagnose(run.model(), run, effects=["higher_bending_modes"], threads=1)
+    s = d.suspects[0]
+    assert s.significant and s.variant == "stiffer root (cantilever split)", s.message
+    assert s.error_after <= 0.1 * s.error_before, (s.error_before, s.error_after)
+    for k in ("k_scale", "root_ratio"):
+        assert np.allclose(s.params[k], truth[k], rtol=0.03), (k, s.params[k], truth[k])
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("effect", ["joint_friction", "higher_bending_modes"])
 def test_a_mujoco_run_with_sensor_biases_is_diagnosed_with_its_offsets_fitted(tmp_path, effect):

@@ -61,7 +61,11 @@ and the combination is kept when it passes the whole test and beats the kept var
 threshold. An *alternative*
 law of an effect (backlash with the link side held in its gap, a play operator, beside the
 gear with a free link side) is fitted whether or not the base is significant, and the one
-that scores higher is kept.
+that scores higher is kept. So is a refinement marked ``always``, one the base law cannot
+stand in for: a link whose root spring is several times its outer one (bending's "stiffer
+root" split) drives an equal-spring fit to its bound and below the threshold, so the base
+says nothing about it; it starts from seeds of its own (each split with a plausible
+stiffness) as well as from the base's fit, and is combined with the other variants.
 
 **The floor.** Nothing is added to a model at its floor: a systematic error of at most
 :data:`AT_FLOOR` and every channel within :data:`FLOOR_MULTIPLE` of its floor, the noise

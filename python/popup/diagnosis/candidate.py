@@ -296,7 +296,7 @@ def try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int
     notes = [note] if note else []
     base_params = est.params_dict(name, fitted.out.flat)
     for var in VARIANTS.get(name, []):
-        if not (fitted.significant or var.get("alternative")):
+        if not (fitted.significant or var.get("alternative") or var.get("always")):
             continue
         try:
             struct = dict(STRUCTURE.get(name) or {})

@@ -468,6 +468,20 @@ def _hints(d: Diagnosis) -> List[Suspect]:
     return sorted(out, key=lambda s: -s.score)[:PAIR_HINTS]
 
 
+def _hint_base(prob: ReplayProblem, h: Suspect, log: Optional[List[str]], what: str) -> Optional[ReplayProblem]:
+    """The nominal model of ``prob`` with hint ``h``'s effect at its fit (at its fit's step
+    where that is smaller) and the unseen motion fitted again: the base a pair with ``h`` is
+    diagnosed from; ``None`` (and a line in ``log`` on ``what``) where it cannot be set up."""
+    try:
+        m = prob.model.with_effect(h.effect, **h.params)  # not h.apply: that brings a refitted effect back
+        return fit_unseen_motion(prob.with_model(m.with_dt(h.dt) if math.isfinite(h.dt) and h.dt < m.dt else m))
+    except KeyboardInterrupt:
+        raise
+    except Exception as ex:  # noqa: BLE001 - the model stands
+        _note(log, f"{what}: failed setting up {h.effect} ({type(ex).__name__}: {ex}); the model stands")
+        return None
+
+
 def _try_pair(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, fitted: Dict[str, List[str]],
               hints: Sequence[Suspect], diags: Sequence[Diagnosis], effects: Optional[Sequence[str]], threads: int, max_iter: int,
               progress: Optional[Progress],
@@ -488,13 +502,8 @@ def _try_pair(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
             _note(log, f"swap of {effect} for {h.effect} and another: no other candidate was significant in any round")
             continue
         what = f"swap of {effect} for {h.effect} (a likelihood gain of {h.score:.3g} beside it) and one of {', '.join(pool)}, each fitted with it from its seeds"
-        try:
-            m = prob.model.with_effect(h.effect, **h.params)  # not h.apply: that brings the refitted effect back
-            base = fit_unseen_motion(prob.with_model(m.with_dt(h.dt) if math.isfinite(h.dt) and h.dt < m.dt else m))
-        except KeyboardInterrupt:
-            raise
-        except Exception as ex:  # noqa: BLE001 - the current model stands
-            _note(log, f"{what}: failed setting up {h.effect} ({type(ex).__name__}: {ex}); the model stands")
+        base = _hint_base(prob, h, log, what)
+        if base is None:
             continue
         out = _best_added(prob, run, base, [h.effect], {h.effect: list(h.fitted)}, pool, [], threads, max_iter, progress, cprob,
                           {effect: fitted[effect]}, log=log, what=what, joint=True)
@@ -526,13 +535,8 @@ def _pair_from_none(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem,
             continue
         what = (f"a pair with {h.effect} (a likelihood gain of {h.score:.3g} that explains {1 - h.error_after ** 2 / e0 ** 2 if e0 > 0 else 0:.0%} "
                 f"of the error alone) and one of {', '.join(pool)}, each fitted with it from its seeds")
-        try:
-            m = prob.model.with_effect(h.effect, **h.params)
-            base = fit_unseen_motion(prob.with_model(m.with_dt(h.dt) if math.isfinite(h.dt) and h.dt < m.dt else m))
-        except KeyboardInterrupt:
-            raise
-        except Exception as ex:  # noqa: BLE001 - the nominal model stands
-            _note(log, f"{what}: failed setting up {h.effect} ({type(ex).__name__}: {ex}); the model stands")
+        base = _hint_base(prob, h, log, what)
+        if base is None:
             continue
         out = _best_added(prob, run, base, [h.effect], {h.effect: list(h.fitted)}, pool, diags, threads, max_iter, progress, cprob, {},
                           log=log, what=what, joint=True)
