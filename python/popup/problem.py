@@ -30,6 +30,14 @@ What it holds (set up once, reused by every fit):
   the quantisation; smoothed again; replayed). A 12-bit encoder on a quiet IMU leaves
   the replay with the true model above the IMU's noise: that is a limit of the data, not
   a missing effect (``floor = sqrt(σ_c² + σ_enc,c²)``, :meth:`ReplayProblem.floor_multiples`).
+  The draws also bound it: the run's own encoder error is one more draw, so the
+  one-sided :data:`ENCODER_LEVEL` prediction bound of one draw's mean square from their
+  spread (Student's t, :attr:`ReplayProblem.encoder_sigma_upper`) is what the true
+  model's replay error may reach. Where the arm's response is very sensitive to its
+  angles (links wrinkled far past their moment, a 12-bit encoder) the draws' mean squares
+  differ by ±45 % and the true model replayed 1.16-1.17 × the point estimate's floor;
+  whether a model is at its floor is judged against the bound (the diagnosis's
+  ``model_at_floor``).
   It is the model's: computed with the first model that asks and shared with derived
   problems; :meth:`ReplayProblem.encoder_bootstrap` computes it for another model and
   :meth:`ReplayProblem.with_encoder_sigma` puts it in (the diagnosis loop does so on each
@@ -121,6 +129,8 @@ SPIKE_SIGMA = 8.0
 SPIKE_WINDOW = 7
 #: Draws of the encoder's error in the bootstrap of :attr:`ReplayProblem.encoder_floor`.
 ENCODER_DRAWS = 6
+ENCODER_LEVEL = 0.95
+"""One-sided level of the prediction bound :attr:`ReplayProblem.encoder_sigma_upper`."""
 _ENCODER_SEED = 0xE1F  # fixed: the same run gives the same floor, bit for bit
 
 
@@ -381,12 +391,14 @@ class ReplayProblem:
             # the encoder's error is the run's, its replay error the model's: shared with every
             # derived problem until :meth:`with_encoder_sigma` puts another model's in
             self._enc = p._enc
+            self._enc_up = p._enc_up
             self.q_base, self.q_corr, self.compliance = p.q_base, p.q_corr, p.compliance
             self._nominal = None
             return
         notes: List[str] = []
         self.notes = notes
         self._enc = [None]
+        self._enc_up: List[Any] = [None]
         self.channels = select_channels(run, channels, self.where, notes, self.closed)
         self.time = np.asarray(run.time, dtype=np.float64)
         self.measured = np.column_stack([np.asarray(run.channel(c), dtype=np.float64) for c in self.channels])
@@ -582,20 +594,36 @@ class ReplayProblem:
         a reference replay or an encoder replayed as measured."""
         e = self._enc[0]
         if e is None:
-            e = self._enc[0] = self.encoder_bootstrap()
+            e, self._enc_up[0] = self.encoder_bootstrap_bounds()
+            self._enc[0] = e
         return e
 
-    def with_encoder_sigma(self, sigma: Any) -> "ReplayProblem":
+    @property
+    def encoder_sigma_upper(self) -> np.ndarray:
+        """(C,) the one-sided :data:`ENCODER_LEVEL` prediction bound of the encoder's replay
+        error [channel unit] for one more draw, such as the run's own encoder error, from
+        the spread of the bootstrap's draws (:attr:`encoder_sigma` itself where no bound is
+        known: a floor put in by :meth:`with_encoder_sigma` without one)."""
+        e = self.encoder_sigma
+        u = self._enc_up[0]
+        return e if u is None else u
+
+    def with_encoder_sigma(self, sigma: Any, upper: Any = None) -> "ReplayProblem":
         """The same problem with the encoder's replay error :attr:`encoder_sigma` replaced by
         ``sigma`` (C,) [channel unit] (e.g. :meth:`encoder_bootstrap` of a refitted model:
         a model whose output is more sensitive to the angles, such as a gear with play
         whose impacts the motor's timing sets, has a higher encoder floor); its simulation
-        is not rerun."""
+        is not rerun. ``upper``: its prediction bound (:attr:`encoder_sigma_upper`; default
+        ``sigma`` itself), at least ``sigma``."""
         e = np.asarray(sigma, dtype=np.float64)
         if e.shape != (len(self.channels),) or not np.all(np.isfinite(e)) or np.any(e < 0):
             raise InputError(f"with_encoder_sigma: sigma must be {len(self.channels)} finite values ≥ 0 (one per channel {self.channels}), got {e.tolist()}")
+        u = e if upper is None else np.asarray(upper, dtype=np.float64)
+        if u.shape != e.shape or not np.all(np.isfinite(u)) or np.any(u < e):
+            raise InputError(f"with_encoder_sigma: upper must be {len(self.channels)} finite values ≥ sigma (one per channel {self.channels}), got {u.tolist()}")
         p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
         p._enc = [e]
+        p._enc_up = [u]
         p._nominal = self._nominal
         return p
 
@@ -624,16 +652,22 @@ class ReplayProblem:
         e = self.encoder_sigma / self.sigma
         return {c: float(math.sqrt(1.0 + v * v)) for c, v in zip(self.channels, e)}
 
-    def floor_multiples(self, per: Dict[str, float]) -> Dict[str, float]:
+    def floor_multiples(self, per: Dict[str, float], upper: bool = False) -> Dict[str, float]:
         """Noise multiples ``per`` (channel → r_c) as multiples of each channel's whole
-        floor, the noise and the encoder's replay error: ``r_c / sqrt(1 + (σ_enc,c/σ_c)²)``."""
-        f = self.encoder_floor
+        floor, the noise and the encoder's replay error: ``r_c / sqrt(1 + (σ_enc,c/σ_c)²)``;
+        ``upper``: with σ_enc at its prediction bound (:attr:`encoder_sigma_upper`)."""
+        if upper:
+            e = self.encoder_sigma_upper / self.sigma
+            f = {c: float(math.sqrt(1.0 + v * v)) for c, v in zip(self.channels, e)}
+        else:
+            f = self.encoder_floor
         return {c: float(v) / f.get(c, 1.0) for c, v in per.items()}
 
-    def floor_error(self, per: Dict[str, float]) -> float:
+    def floor_error(self, per: Dict[str, float], upper: bool = False) -> float:
         """The systematic error S (:data:`ERROR_DEFINITION`) above the whole floor (noise and
-        encoder) of the noise multiples ``per``."""
-        fm = [v for v in self.floor_multiples(per).values()]
+        encoder) of the noise multiples ``per``; ``upper``: above the floor's upper bound
+        (:meth:`floor_multiples`)."""
+        fm = [v for v in self.floor_multiples(per, upper).values()]
         if not fm or not all(math.isfinite(v) for v in fm):
             return math.inf
         return systematic(np.square(np.asarray(fm)))
@@ -643,10 +677,17 @@ class ReplayProblem:
         this problem's model (module docs: parametric bootstrap, :data:`ENCODER_DRAWS`
         replays with a fixed seed), computed afresh (:attr:`encoder_sigma` is the first
         model's unless :meth:`with_encoder_sigma` set another)."""
+        return self.encoder_bootstrap_bounds()[0]
+
+    def encoder_bootstrap_bounds(self) -> Tuple[np.ndarray, np.ndarray]:
+        """:meth:`encoder_bootstrap` and its one-sided :data:`ENCODER_LEVEL` prediction bound
+        for one more draw (C,) [channel unit], from the same draws: the square root of their
+        mean square plus Student's t times ``s·sqrt(1 + 1/n)`` (``s`` the draws' standard
+        deviation of the mean square, ``n`` the draws)."""
         C = len(self.channels)
         sm = self.smoothing
         if self.closed or sm is None or not any(v is not None for v in sm.params.get("lam", [None] * 3)):
-            return np.zeros(C)
+            return np.zeros(C), np.zeros(C)
         from .smoothing import smooth_encoder
 
         par = sm.params
@@ -655,7 +696,7 @@ class ReplayProblem:
         # unseen motion (popup.unseen) added to them, so shared by every derived problem
         t, g = self.t_enc, self.q_base
         base = self.replay_angles(g) if np.any(self.q_corr != 0) else self.nominal_simulation()
-        acc, n = np.zeros(C), 0
+        ms: List[np.ndarray] = []
         for _ in range(ENCODER_DRAWS):
             y = g.copy()
             for j in range(3):
@@ -674,9 +715,17 @@ class ReplayProblem:
                 continue
             d = d[self.used]
             with np.errstate(invalid="ignore"):
-                acc += np.nan_to_num(np.nanmean(d * d, axis=0))
-            n += 1
-        return np.sqrt(acc / n) if n else np.zeros(C)
+                ms.append(np.nan_to_num(np.nanmean(d * d, axis=0)))
+        if not ms:
+            return np.zeros(C), np.zeros(C)
+        m = np.array(ms)
+        mean = m.mean(axis=0)
+        if len(ms) < 2:
+            return np.sqrt(mean), np.sqrt(mean)
+        from scipy.stats import t as student_t
+
+        spread = m.std(axis=0, ddof=1) * math.sqrt(1.0 + 1.0 / len(ms))
+        return np.sqrt(mean), np.sqrt(mean + float(student_t.ppf(ENCODER_LEVEL, len(ms) - 1)) * spread)
 
     @property
     def at_floor(self) -> List[str]:

@@ -70,7 +70,9 @@ stiffness) as well as from the base's fit, and is combined with the other varian
 **The floor.** Nothing is added to a model at its floor: a systematic error of at most
 :data:`AT_FLOOR` and every channel within :data:`FLOOR_MULTIPLE` of its floor, the noise
 and the replay error the encoder's own error causes
-(:attr:`ReplayProblem.encoder_floor`, a parametric bootstrap). A quantised encoder limits
+(:attr:`ReplayProblem.encoder_floor`, a parametric bootstrap; its encoder part taken at
+the bootstrap's 95 % prediction bound for one draw, :attr:`ReplayProblem.encoder_sigma_upper`,
+since the run's own encoder error is one such draw). A quantised encoder limits
 how well q̈, and so the replayed torques and accelerations, can be known: with a 12-bit
 encoder and a quiet IMU the true model replays at up to 1.3 × the IMU's noise, and
 an effect fitted there (a +0.8 g payload for 54 % of it, on a MuJoCo run) fits the

@@ -8,7 +8,7 @@ from typing import Dict, List, Mapping, Optional
 
 from ..problem import SPIKE_SIGMA, ReplayProblem
 from ..results import UNITS
-from .rules import AT_FLOOR, FLOOR_MULTIPLE, OFFSET_SHARE, SCORE_THRESHOLD, SPIKE_SHARE
+from .rules import AT_FLOOR, FLOOR_MULTIPLE, OFFSET_SHARE, SCORE_THRESHOLD, SPIKE_SHARE, floor_words
 from .results import Diagnosis, History, Suspect, final_problem, fmt_params, step_at_floor
 
 
@@ -45,7 +45,8 @@ def round_conclusion(d: Diagnosis) -> str:
         parts.append(f"at the noise floor (systematic error {d.nominal_error:.3g} noise units): no library effect is significant")
     elif d.model_at_floor:
         parts.append(f"at its floor, the noise and the encoder's resolution (systematic error {d.nominal_error:.3g} noise units, "
-                     f"{d.floor_error:.3g} above the floor; {_encoder_text(d.encoder_floor)}): no library effect is significant")
+                     f"{d.floor_error:.3g} above the floor" + (f", {d.floor_error_upper:.3g} above its prediction bound" if d.floor_error_upper < d.floor_error - 5e-4 else "")
+                     + f"; {_encoder_text(d.encoder_floor)}): no library effect is significant")
     else:
         parts.append(f"no library effect explains the systematic error of {d.nominal_error:.3g} noise units: it is not explained by the library ({_where(d)})")
     if d.untested and not d.model_at_floor:
@@ -150,7 +151,7 @@ def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) 
         else:
             assert prob0 is not None
             what = (f"its floor, the noise and the encoder's resolution (systematic error {last.error:.3g} noise units, "
-                    f"{prob0.floor_error(last.channel_error):.3g} above that floor; {_encoder_text(prob0.encoder_floor)})")
+                    f"{floor_words(prob0, last.channel_error)}; {_encoder_text(prob0.encoder_floor)})")
         left = f"what is left is at {what}"
         if parts and floor:
             left += f", every channel within {FLOOR_MULTIPLE:g}× its floor: nothing more was tried"

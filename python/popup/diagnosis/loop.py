@@ -346,8 +346,8 @@ def _encoder_update(prob: ReplayProblem, cprob: ReplayProblem, effects: Sequence
     change above :data:`ENCODER_NOTE` goes to ``notes``; a failure keeps the floor used."""
     old = cprob.encoder_floor
     try:
-        e = cprob.encoder_bootstrap()
-        prob, cprob = prob.with_encoder_sigma(e), cprob.with_encoder_sigma(e)
+        e, up = cprob.encoder_bootstrap_bounds()
+        prob, cprob = prob.with_encoder_sigma(e, up), cprob.with_encoder_sigma(e, up)
     except Exception as ex:  # noqa: BLE001 - a check: the loop goes on in the floor it had
         notes.append(f"round {rnd}: bootstrapping the encoder floor again failed ({type(ex).__name__}: {ex}); the floor used stands")
         return prob, cprob

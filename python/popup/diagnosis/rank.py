@@ -17,7 +17,7 @@ from ..exceptions import InputError
 from ..io import MeasuredRun
 from ..problem import Cancelled, ReplayProblem
 from ..unseen import fit_unseen_motion
-from .rules import FLOOR_MULTIPLE, JOINT_TOP, UNSEEN_TOP, Progress, model_at_floor
+from .rules import FLOOR_MULTIPLE, JOINT_TOP, UNSEEN_TOP, Progress, floor_words, model_at_floor
 from .results import Diagnosis, Suspect
 from .evidence import evidence_for
 from .candidate import left_out, rank_key, refit_jointly, refit_with_own_unseen, screen_fit, screen_without_unseen, try_effect
@@ -228,8 +228,8 @@ def diagnose(
     evs: Dict[str, Dict[str, Any]] = {}
     floor = model_at_floor(prob, e0, per0)
     if floor and not rank_at_floor:
-        why = (f"not tried: the model is at its floor (systematic error {prob.floor_error(per0):.3g} above the noise and the "
-               f"encoder's replay error, every channel within {FLOOR_MULTIPLE:g}× of it): nothing is left for an effect to "
+        why = (f"not tried: the model is at its floor (systematic error {floor_words(prob, per0)}, every channel within {FLOOR_MULTIPLE:g}× of it): "
+               "nothing is left for an effect to "
                "explain (rank_at_floor=True, or --rank-at-floor, fits them anyway)")
         todo = []
         for name in names:
@@ -291,8 +291,7 @@ def diagnose(
         suspects[:n_own] = owns
         suspects.sort(key=rank_key)
     if floor and todo:
-        why = (f"not significant: the model is at its floor (systematic error {prob.floor_error(per0):.3g} above the noise "
-               f"and the encoder's replay error, every channel within {FLOOR_MULTIPLE:g}× of it)")
+        why = f"not significant: the model is at its floor (systematic error {floor_words(prob, per0)}, every channel within {FLOOR_MULTIPLE:g}× of it)"
         for s in suspects:
             if s.significant:
                 s.significant = False
@@ -314,6 +313,7 @@ def diagnose(
         problem=prob,
         encoder_floor=prob.encoder_floor,
         floor_error=prob.floor_error(per0),
+        floor_error_upper=prob.floor_error(per0, upper=True),
         model_at_floor=floor,
     )
     d.conclusion = round_conclusion(d)

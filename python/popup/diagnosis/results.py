@@ -204,6 +204,9 @@ class Diagnosis:
         the noise (:attr:`ReplayProblem.encoder_floor`; 1 = nothing).
     floor_error : float
         The systematic error above the whole floor (noise and encoder).
+    floor_error_upper : float
+        The same above the floor with the encoder's part at its prediction bound
+        (:attr:`ReplayProblem.encoder_sigma_upper`), the one ``model_at_floor`` judges.
     model_at_floor : bool
         Whether the model is at its floor (module docs): then nothing is significant.
     seconds : float
@@ -225,6 +228,7 @@ class Diagnosis:
     encoder_floor: Dict[str, float] = field(default_factory=dict)
     floor_error: float = math.nan
     model_at_floor: bool = False
+    floor_error_upper: float = math.nan
 
     @property
     def significant(self) -> List[Suspect]:
@@ -286,6 +290,7 @@ class Diagnosis:
             "at_noise_floor": list(self.at_floor),
             "encoder_floor": {k: _num(v) for k, v in self.encoder_floor.items()},
             "floor_error": _num(self.floor_error),
+            "floor_error_upper": _num(self.floor_error_upper),
             "model_at_floor": bool(self.model_at_floor),
             "unseen_compliance": [_num(x) for x in (self.problem.compliance if self.problem is not None else np.zeros(3))],
             "residual_white": bool(self.residual_white),
