@@ -356,6 +356,7 @@ class ReplayProblem:
     q_base: np.ndarray
     q_corr: np.ndarray
     compliance: np.ndarray
+    _enc_up: List[Any]
 
     def __init__(
         self,
@@ -406,7 +407,7 @@ class ReplayProblem:
         notes: List[str] = []
         self.notes = notes
         self._enc = [None]
-        self._enc_up: List[Any] = [None]
+        self._enc_up = [None]
         self.channels = select_channels(run, channels, self.where, notes, self.closed)
         self.time = np.asarray(run.time, dtype=np.float64)
         self.measured = np.column_stack([np.asarray(run.channel(c), dtype=np.float64) for c in self.channels])
