@@ -46,10 +46,10 @@ What it holds (set up once, reused by every fit):
   motion inside an encoder reading, fitted as a joint compliance bounded to a reading
   (:meth:`ReplayProblem.with_unseen_motion`, :attr:`ReplayProblem.compliance`; zeros and
   the smoothed encoder as is unless it is significant).
-* **Training and validation samples**: the run cut in :data:`N_BLOCKS` equal time
-  blocks; every third, :data:`VALIDATION_BLOCKS`, is held out (33 %, spread over the run
-  and short, a third of a second on a 10 s run, so that a joint that moves once is seen
-  moving in both parts). Fits use the training samples; an effect is
+* **Training and validation samples**: the run cut in equal time blocks, at least
+  :data:`N_BLOCKS` and none longer than :data:`BLOCK_MAX_S` (:func:`holdout_split`); every
+  third, from the second, is held out (33 %, spread over the run and short, a third of a
+  second on a 10 s run, so that a joint that moves once is seen moving in both parts). Fits use the training samples; an effect is
   confirmed on the held-out ones. A record that starts in motion without an
   ``[initial]`` table has an unknown bending state at its start: its first
   :data:`BURN_IN_S` seconds (at most 20 %) are left out of every error and fit (noted).
@@ -88,7 +88,7 @@ __all__ = [
     "output_rate",
     "ERROR_DEFINITION",
     "N_BLOCKS",
-    "VALIDATION_BLOCKS",
+    "BLOCK_MAX_S",
     "DEFAULT_CHANNELS",
     "SPIKE_SIGMA",
     "SPIKE_WINDOW",
@@ -106,14 +106,19 @@ ERROR_DEFINITION = (
     "on a refitted model where it differs by more than 1.2x); 0 = at the noise floor"
 )
 N_BLOCKS = 30
-"""Equal time blocks the run is cut into for training/validation. It was 10 until
-session 36: a MuJoCo trapezoid run (10.5 s, 200 Hz) moved joints 2 and 3 once, in
-t = 4.0-5.0 s, nearly all inside held-out block 4 (4.2-5.25 s); their friction, fitted
-on holds alone, went to the viscous bound (b = 100 N·m·s/rad, mimicking a stiction the
-smooth law has not), the held-out error rose 16.9 → 217 noise units and the effect was
-refused. With 30 blocks every parameter lands on the truth (14.3 → 0.57 noise units)."""
-VALIDATION_BLOCKS: Tuple[int, ...] = tuple(range(1, N_BLOCKS, 3))
-"""Blocks (0-based) held out for validation: every third."""
+"""Fewest equal time blocks the run is cut into for training/validation (more where a
+block would exceed :data:`BLOCK_MAX_S`). It was 10 until session 36: a MuJoCo trapezoid
+run (10.5 s, 200 Hz) moved joints 2 and 3 once, in t = 4.0-5.0 s, nearly all inside
+held-out block 4 (4.2-5.25 s); their friction, fitted on holds alone, went to the viscous
+bound (b = 100 N·m·s/rad, mimicking a stiction the smooth law has not), the held-out
+error rose 16.9 → 217 noise units and the effect was refused. With 30 blocks every
+parameter lands on the truth (14.3 → 0.57 noise units)."""
+
+BLOCK_MAX_S = 0.4
+"""Longest training/validation block [s]: a run longer than ``N_BLOCKS × BLOCK_MAX_S``
+(12 s) is cut into more blocks (a multiple of 3), so that any stretch of 1.2 s or more, a
+joint's only move say, is at least a third training and a sixth held out whatever the
+run's length (a lab's 60 s record would otherwise have held out whole 2 s blocks)."""
 
 DEFAULT_CHANNELS: Tuple[str, ...] = (
     "tau1", "tau2", "tau3", "ee_x", "ee_y", "ee_z",
@@ -957,10 +962,13 @@ def _floors(t: np.ndarray, resid: np.ndarray, y: np.ndarray, channels: Sequence[
 
 def holdout_split(t: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """``(train, validation)`` boolean masks of the stamps ``t`` [s]: the span cut in
-    :data:`N_BLOCKS` equal blocks, those of :data:`VALIDATION_BLOCKS` held out."""
-    edges = np.linspace(t[0], t[-1], N_BLOCKS + 1)
-    b = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, N_BLOCKS - 1)
-    val = np.isin(b, VALIDATION_BLOCKS)
+    ``n`` equal blocks (at least :data:`N_BLOCKS`, a multiple of 3 with none longer than
+    :data:`BLOCK_MAX_S`), every third from the second (0-based 1, 4, 7, …) held out."""
+    span = float(t[-1] - t[0]) if len(t) else 0.0
+    n = max(N_BLOCKS, 3 * math.ceil(span / (3.0 * BLOCK_MAX_S) - 1e-9))
+    edges = np.linspace(t[0], t[-1], n + 1)
+    b = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, n - 1)
+    val = b % 3 == 1
     return ~val, val
 
 

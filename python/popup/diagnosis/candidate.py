@@ -242,24 +242,36 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         ph = p.with_horizon(t0 + h)
         if ph is not p:
             xh, _ = est.best_start(ph, free_all, flat, cands)
+            unresolved: Optional[List[int]] = None
             if name in COORDINATE_SEEDS:
-                xh = _coordinate_seeds(ph, name, free_all, flat, xh)
+                xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh)
             xh = est.fit(ph, flat, free_all, xh, iters).x
             while 2.0 * h < t1 - t0:
                 h *= 2.0
                 ph = p.with_horizon(t0 + h)
+                if unresolved:
+                    # a joint whose gap the shorter horizon could not tell (it had not
+                    # crossed it yet) is swept again where it does: the local fit alone
+                    # cannot leave the needle it was left in
+                    xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh, unresolved)
                 xh = est.fit(ph, flat, free_all, xh, iters, mask=p.train[p.time <= t0 + h]).x
+            if unresolved:
+                xh, _ = _coordinate_seeds(p, name, free_all, flat, xh, unresolved)
             cands.append(xh)
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
     return _Fitted(name, variant, p, z_base, free_all, out, k=len(free) + k_extra), note
 
 
-def _coordinate_seeds(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """One sweep over the entries of ``name``'s seeded parameters: each entry in turn set to
-    every value of a fine log grid over its seeds' range (the others at the best so far), the
-    best kept (one batched rollout per entry). Seeds that move every joint together miss
-    unequal gaps."""
+def _coordinate_seeds(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray,
+                      entries: Optional[Sequence[int]] = None) -> Tuple[np.ndarray, List[int]]:
+    """One sweep over the entries of ``name``'s seeded parameters (or the indices
+    ``entries`` of ``free``): each entry in turn set to every value of a fine log grid over
+    its seeds' range (the others at the best so far), the best kept (one batched rollout
+    per entry). Seeds that move every joint together miss unequal gaps. Returns the best
+    and the entries the sweep did not resolve: over their whole grid the training
+    likelihood moved by less than :data:`SCORE_THRESHOLD` (a joint that has not crossed its
+    gap within the horizon)."""
     seen: Dict[str, List[float]] = {}
     for seed in est.SEEDS.get(name, []):
         for k, v in seed.items():
@@ -268,16 +280,21 @@ def _coordinate_seeds(prob: ReplayProblem, name: str, free: List[Tuple[fx.Effect
     # gap makes the objective a needle a few % wide in that gap, even on the short horizon
     grid = {k: np.exp(np.arange(math.log(min(v)), math.log(max(v)) + 1e-9, math.log(COORDINATE_STEP))).tolist() for k, v in seen.items() if min(v) > 0}
     x = np.asarray(x, dtype=float).copy()
+    unresolved: List[int] = []
     for j, (q, _) in enumerate(free):
-        if q.effect != name or q.name not in grid:
+        if q.effect != name or q.name not in grid or (entries is not None and j not in entries):
             continue
         cands = [x]
         for v in grid[q.name]:
             c = x.copy()
             c[j] = min(max(v, q.lower), q.upper)
             cands.append(c)
-        x, _ = est.best_start(prob, free, flat, cands)
-    return x
+        x, vals = est.best_start(prob, free, flat, cands)
+        ok = np.asarray(vals, dtype=float)
+        ok = ok[np.isfinite(ok)]
+        if ok.size == 0 or float(ok.max() - ok.min()) < SCORE_THRESHOLD:
+            unresolved.append(j)
+    return x, unresolved
 
 
 def try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int, also: Optional[List[Tuple[fx.EffectParam, int]]] = None,

@@ -96,7 +96,8 @@ from, say, 0.15 to 0.08 noise units are fitting that uncertainty, not physics.""
 SHORT_FIRST = {"higher_bending_modes", "torsion", "payload_mass", "wrinkling", "pressure_leak", "air_drag", "backlash"}
 
 
-#: Effects whose per-joint seeded parameters are also swept joint by joint (on the short horizon).
+#: Effects whose per-joint seeded parameters are also swept joint by joint (on the short
+#: horizon, and again on each longer one for a joint the shorter could not tell).
 COORDINATE_SEEDS = {"backlash"}
 
 
