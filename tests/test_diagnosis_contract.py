@@ -284,6 +284,61 @@ def test_a_small_bite_of_a_misfit_is_not_significant_however_large_its_likelihoo
     assert f.significant == (kept < 0.5)
 
 
+@pytest.mark.parametrize("kept", [0.1, 0.85])
+def test_isolated_spikes_a_candidate_leaves_do_not_hide_what_it_explains(nominal, friction_run, kept):
+    """A rattling gear's impacts, left by a fitted backlash, are isolated spikes on a motor
+    torque (MuJoCo pair seed 612: 824 samples, 82 % of tau1's excess): friction beside them
+    explained 93 % of tau2's error and was refused by the share rule over the torques. The
+    rule now sets aside the spikes the candidate leaves untouched; a candidate that takes
+    only a small bite of the smooth error is still refused, and one that removes the
+    spikes is judged with them."""
+    prob = popup.ReplayProblem(nominal, friction_run)
+    n, C = prob.residuals(prob.nominal_simulation()).shape
+    rng = np.random.default_rng(7)
+    noise = rng.standard_normal((n, C))
+    t = np.asarray(prob.time)
+    j1, j2 = prob.channels.index("tau1"), prob.channels.index("tau2")
+    smooth = np.zeros((n, C))
+    # what friction explains: 3 noise sigmas on tau2, at a fifth of the sample rate (a
+    # residual whose samples are nearly independent, so that its likelihood ratio is large)
+    smooth[:, j2] = 3.0 * np.sin(2 * np.pi * t / (5 * float(np.median(np.diff(t)))))
+    spikes = np.zeros((n, C))
+    rows = rng.choice(np.flatnonzero(prob.used), size=n // 15, replace=False)
+    spikes[rows, j1] = 60.0 * rng.choice([-1.0, 1.0], size=rows.size)  # impacts sharper than a sample
+    base, after = noise + smooth + spikes, noise + kept * smooth + spikes
+    free = popup.estimate.free_params("joint_friction")
+
+    def fitted(z):
+        out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=z, J=np.zeros((1, 1)),
+                                        weights=np.ones(C), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
+        return dgc._Fitted("joint_friction", "", prob, base, free, out)
+
+    f = fitted(after)
+    assert f.acts == ["tau1", "tau2", "tau3"]
+    assert f.score > 10 * dg.SCORE_THRESHOLD and f.lr_val > 0 and f.v1 < f.v0
+    # with the spikes the torques' systematic error is mostly tau1's impacts: under the share
+    whole = dgc.share_where_it_acts(prob, "joint_friction", free, base, after, f.explained)
+    ms0, _, _ = prob.channel_stats(base)
+    ms1, _, _ = prob.channel_stats(after)
+    idx = [prob.channels.index(c) for c in f.acts]
+    raw = 1 - (np.mean(ms1[idx]) - 1) / (np.mean(ms0[idx]) - 1)
+    assert raw < dgr.MIN_EXPLAINED
+    assert whole[0] == pytest.approx(1 - kept**2, abs=0.05)  # the spike-free share
+    assert f.significant == (kept < 0.5)
+    if f.significant:
+        assert "isolated spikes it leaves set aside" in f.spike_note and f"tau1 {rows.size}" in f.spike_note, f.spike_note
+    # a candidate that removes the impacts too is judged with them (nothing set aside)
+    g = fitted(noise + kept * smooth)
+    assert g.spike_note == "" and g.significant
+    # with nothing but noise left beside the spikes (the smooth error at the floor), the
+    # share is the whole one: a tiny bite of a spiky residual is not made significant
+    h_base = noise + spikes
+    out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=0.98 * noise + spikes, J=np.zeros((1, 1)),
+                                    weights=np.ones(C), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
+    h = dgc._Fitted("joint_friction", "", prob, h_base, free, out)
+    assert h.spike_note == "" and not h.significant and h.share < dgr.MIN_EXPLAINED
+
+
 def test_isolated_spikes_are_named_where_the_error_is_left(nominal, friction_run, tmp_path):
     """Sensor glitches (a few samples far from their neighbours) are named with their share
     of the channel's excess; a clean run has none (8σ from a running median: ~1e-14 per sample)."""

@@ -884,6 +884,22 @@ class ReplayProblem:
             return math.inf, {c: math.inf for c in self.channels}
         return systematic(ms), {c: float(math.sqrt(m)) for c, m in zip(self.channels, ms)}
 
+    def spike_mask(self, z: np.ndarray) -> np.ndarray:
+        """The isolated spikes of the residual ``z`` (n, C) in noise units, as a boolean
+        (n, C) array: the :attr:`used` samples further than :data:`SPIKE_SIGMA` from the
+        median of the :data:`SPIKE_WINDOW` finite samples around them (:meth:`spikes`)."""
+        from scipy.ndimage import median_filter
+
+        z = np.asarray(z, dtype=float)
+        hit = np.zeros(z.shape, dtype=bool)
+        for j in range(z.shape[1]):
+            ok = np.flatnonzero(np.isfinite(z[:, j]) & self.used)
+            if len(ok) < SPIKE_WINDOW:
+                continue
+            x = z[ok, j]
+            hit[ok, j] = np.abs(x - median_filter(x, size=SPIKE_WINDOW, mode="nearest")) > SPIKE_SIGMA
+        return hit
+
     def spikes(self, z: Optional[np.ndarray] = None) -> Dict[str, Dict[str, Any]]:
         """Isolated spikes in the residual ``z`` (n, C) in noise units (default: the model as
         given): per channel with any, the samples further than :data:`SPIKE_SIGMA` from the
@@ -894,23 +910,21 @@ class ReplayProblem:
 
         if z is None:
             z = self.residuals(self.nominal_simulation())
+        mask = self.spike_mask(z)
         out: Dict[str, Dict[str, Any]] = {}
         t = np.asarray(self.time, dtype=float)
         for j, c in enumerate(self.channels):
             ok = np.flatnonzero(np.isfinite(z[:, j]) & self.used)
-            if len(ok) < SPIKE_WINDOW:
+            hit = mask[ok, j]
+            if len(ok) < SPIKE_WINDOW or not hit.any():
                 continue
             x = z[ok, j]
             dev = x - median_filter(x, size=SPIKE_WINDOW, mode="nearest")
-            hit = np.abs(dev) > SPIKE_SIGMA
-            if not hit.any():
-                continue
             excess = float(np.sum(x * x)) - len(x)
             part = float(np.sum(x[hit] ** 2 - (x[hit] - dev[hit]) ** 2))
             out[c] = {"count": int(hit.sum()), "times": [float(v) for v in t[ok[hit]][:5]],
                       "share": float(min(max(part / excess, 0.0), 1.0)) if excess > 0 else 0.0}
         return out
-
 
     def offsets(self, z: Optional[np.ndarray] = None) -> Dict[str, Dict[str, float]]:
         """The constant part of the residual ``z`` (n, C) in noise units (default: the model
