@@ -291,7 +291,9 @@ def test_isolated_spikes_a_candidate_leaves_do_not_hide_what_it_explains(nominal
     explained 93 % of tau2's error and was refused by the share rule over the torques. The
     rule now sets aside the spikes the candidate leaves untouched; a candidate that takes
     only a small bite of the smooth error is still refused, and one that removes the
-    spikes is judged with them."""
+    spikes is judged with them. Only for effects that act on some channels only in replay
+    (the torques, for friction): one that moves the arm keeps the whole share (stand-ins,
+    docs/effects.md step 5)."""
     prob = popup.ReplayProblem(nominal, friction_run)
     n, C = prob.residuals(prob.nominal_simulation()).shape
     rng = np.random.default_rng(7)
@@ -327,6 +329,11 @@ def test_isolated_spikes_a_candidate_leaves_do_not_hide_what_it_explains(nominal
     assert f.significant == (kept < 0.5)
     if f.significant:
         assert "isolated spikes it leaves set aside" in f.spike_note and f"tau1 {rows.size}" in f.spike_note, f.spike_note
+    # an effect that moves the arm acts on every channel: its share is the whole one
+    out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=after, J=np.zeros((1, 1)),
+                                    weights=np.ones(C), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
+    p = dgc._Fitted("payload_mass", "", prob, base, popup.estimate.free_params("payload_mass"), out)
+    assert p.acts is None and p.spike_note == "" and p.share == p.explained < dgr.MIN_EXPLAINED and not p.significant
     # a candidate that removes the impacts too is judged with them (nothing set aside)
     g = fitted(noise + kept * smooth)
     assert g.spike_note == "" and g.significant

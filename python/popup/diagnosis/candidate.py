@@ -113,24 +113,25 @@ def silent_on(mask: np.ndarray, z0: np.ndarray, z1: np.ndarray) -> bool:
 def share_where_it_acts(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], z0: np.ndarray, z1: np.ndarray,
                         explained: float) -> Tuple[float, Optional[List[str]], str]:
     """The share of the systematic error a candidate explains, for the share rule
-    (:data:`MIN_EXPLAINED`), the channels it was measured on, and a note when the spikes
-    were set aside. The channels: for a candidate whose fitted parameters all act on some
-    sensor rows only in encoder replay (:func:`popup.effects.acts_only_on`: friction and
-    its clamp on the motor torques), those channels (it cannot explain an error of the
-    others, whatever causes it), returned; else every channel (then ``None``), whose share
-    is ``explained``. The share is ``1 − S²_after/S²_before`` over them, or, when larger,
-    the same with the isolated spikes the candidate leaves untouched set aside (samples
-    that are :meth:`ReplayProblem.spike_mask` spikes of both residuals: impacts or glitches
-    sharper than a sample, which no smooth law reproduces and :func:`popup.diagnosis.
-    conclusion` reports on their own), provided the error left without them is above
-    :data:`AT_FLOOR`: a rattling gear's impact spikes, left by a fitted backlash, would
-    otherwise hide the friction beside it (benchmarks/README.md, session 43)."""
-    acts: Optional[List[str]] = None
-    if not (prob.closed or any(p.effect != name for p, _ in free)):
-        a = fx.acts_only_on(name, sorted({p.name for p, _ in free}), prob.channels)
-        if a and len(a) < len(prob.channels):
-            acts = a
-    idx = list(range(len(prob.channels))) if acts is None else [prob.channels.index(c) for c in acts]
+    (:data:`MIN_EXPLAINED`), the channels it was measured on, and a note when spikes were
+    set aside. For a candidate whose fitted parameters all act on some sensor rows only in
+    encoder replay (:func:`popup.effects.acts_only_on`: friction and its clamp on the motor
+    torques, a sensor group's delay), the share ``1 − S²_after/S²_before`` of those
+    channels (it cannot explain an error of the others, whatever causes it), or, when
+    larger, the same with the isolated spikes it leaves untouched set aside (samples that
+    are :meth:`ReplayProblem.spike_mask` spikes of both residuals: impacts or glitches
+    sharper than a sample, which no smooth law reproduces and the conclusion names on
+    their own), provided the error left without them is above :data:`AT_FLOOR`: a
+    rattling gear's impact spikes on a motor torque, left by a fitted backlash, hid the
+    friction beside it (benchmarks/README.md, session 43). Else ``explained``, the share
+    of the whole error, and ``None``: a candidate that moves the arm acts on every
+    channel, and a looser share for those lets stand-ins in (docs/effects.md, step 5)."""
+    if prob.closed or any(p.effect != name for p, _ in free):
+        return explained, None, ""
+    acts = fx.acts_only_on(name, sorted({p.name for p, _ in free}), prob.channels)
+    if not acts or len(acts) == len(prob.channels):
+        return explained, None, ""
+    idx = [prob.channels.index(c) for c in acts]
 
     def share(za: np.ndarray, zb: np.ndarray) -> Tuple[float, float]:
         ms0, _, _ = prob.channel_stats(za)
@@ -139,9 +140,9 @@ def share_where_it_acts(prob: ReplayProblem, name: str, free: List[Tuple[fx.Effe
         s1 = max(float(np.mean(ms1[idx])) - 1.0, 0.0)
         return (1.0 - s1 / s0 if s0 > 0 and math.isfinite(s1) else 0.0), s0
 
-    whole = explained if acts is None else share(z0, z1)[0]
-    spiky = prob.spike_mask(z0) & prob.spike_mask(z1)
-    spiky[:, [j for j in range(spiky.shape[1]) if j not in idx]] = False
+    whole, _ = share(z0, z1)
+    spiky = np.zeros(np.shape(z0), dtype=bool)
+    spiky[:, idx] = prob.spike_mask(z0)[:, idx] & prob.spike_mask(z1)[:, idx]
     if not spiky.any():
         return whole, acts, ""
     a0, a1 = np.array(z0, dtype=float), np.array(z1, dtype=float)
@@ -150,9 +151,12 @@ def share_where_it_acts(prob: ReplayProblem, name: str, free: List[Tuple[fx.Effe
     smooth, s0 = share(a0, a1)
     if not (smooth > whole and s0 > AT_FLOOR ** 2):
         return whole, acts, ""
+    if not whole < MIN_EXPLAINED <= smooth:
+        return smooth, acts, ""
     where = ", ".join(f"{prob.channels[j]} {int(spiky[:, j].sum())}" for j in idx if spiky[:, j].any())
-    return smooth, acts, (f"{100 * smooth:.0f} % of the systematic error with the isolated spikes it leaves set aside "
-                          f"({where} sample(s); {100 * whole:.0f} % with them): the share rule is applied there")
+    return smooth, acts, (f"it explains {100 * smooth:.0f} % of the systematic error on {', '.join(acts)}, the only channels it acts on "
+                          f"in replay, with the isolated spikes it leaves set aside ({where} sample(s); {100 * whole:.0f} % with them, "
+                          f"{100 * explained:.0f} % of the whole error): the share rule is applied there")
 
 
 def rank_key(s: Suspect) -> Tuple[int, int, float]:
