@@ -293,7 +293,9 @@ def test_isolated_spikes_a_candidate_leaves_do_not_hide_what_it_explains(nominal
     only a small bite of the smooth error is still refused, and one that removes the
     spikes is judged with them. Only for effects that act on some channels only in replay
     (the torques, for friction): one that moves the arm keeps the whole share (stand-ins,
-    docs/effects.md step 5)."""
+    docs/effects.md step 5). Refitted jointly with an effect that moves the arm (on that
+    run the joint refit then lost the torques' share), friction is still judged on the
+    torques, net of what the refit adds on the other channels."""
     prob = popup.ReplayProblem(nominal, friction_run)
     n, C = prob.residuals(prob.nominal_simulation()).shape
     rng = np.random.default_rng(7)
@@ -310,10 +312,10 @@ def test_isolated_spikes_a_candidate_leaves_do_not_hide_what_it_explains(nominal
     base, after = noise + smooth + spikes, noise + kept * smooth + spikes
     free = popup.estimate.free_params("joint_friction")
 
-    def fitted(z):
+    def fitted(z, name="joint_friction", params=free, z0=base, k=None):
         out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=z, J=np.zeros((1, 1)),
                                         weights=np.ones(C), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
-        return dgc._Fitted("joint_friction", "", prob, base, free, out)
+        return dgc._Fitted(name, "", prob, z0, params, out, k=k)
 
     f = fitted(after)
     assert f.acts == ["tau1", "tau2", "tau3"]
@@ -330,19 +332,25 @@ def test_isolated_spikes_a_candidate_leaves_do_not_hide_what_it_explains(nominal
     if f.significant:
         assert "isolated spikes it leaves set aside" in f.spike_note and f"tau1 {rows.size}" in f.spike_note, f.spike_note
     # an effect that moves the arm acts on every channel: its share is the whole one
-    out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=after, J=np.zeros((1, 1)),
-                                    weights=np.ones(C), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
-    p = dgc._Fitted("payload_mass", "", prob, base, popup.estimate.free_params("payload_mass"), out)
+    p = fitted(after, "payload_mass", popup.estimate.free_params("payload_mass"))
     assert p.acts is None and p.spike_note == "" and p.share == p.explained < dgr.MIN_EXPLAINED and not p.significant
+    # refitted jointly with an earlier effect that moves the arm (the loop's joint refit):
+    # still judged on the torques, net of what the refit adds to the other channels
+    joint = free + popup.estimate.free_params("payload_mass")
+    imu = [prob.channels.index(c) for c in prob.channels if c.startswith("imu")]
+    for worse, ok in ((0.02, kept < 0.5), (1.5, False)):
+        z1 = after.copy()
+        z1[:, imu] *= math.sqrt(1.0 + worse)  # each IMU channel's mean square up by that much
+        jf = fitted(z1, params=joint, k=len(free))
+        assert jf.acts == ["tau1", "tau2", "tau3"], jf.acts
+        assert jf.significant == ok, (worse, jf.share, jf.score)
+        assert (jf.share >= dgr.MIN_EXPLAINED) == (kept < 0.5 and worse < 1), (worse, jf.share)  # the IMUs paid for it
     # a candidate that removes the impacts too is judged with them (nothing set aside)
     g = fitted(noise + kept * smooth)
     assert g.spike_note == "" and g.significant
     # with nothing but noise left beside the spikes (the smooth error at the floor), the
     # share is the whole one: a tiny bite of a spiky residual is not made significant
-    h_base = noise + spikes
-    out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=0.98 * noise + spikes, J=np.zeros((1, 1)),
-                                    weights=np.ones(C), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
-    h = dgc._Fitted("joint_friction", "", prob, h_base, free, out)
+    h = fitted(0.98 * noise + spikes, z0=noise + spikes)
     assert h.spike_note == "" and not h.significant and h.share < dgr.MIN_EXPLAINED
 
 

@@ -113,49 +113,56 @@ def silent_on(mask: np.ndarray, z0: np.ndarray, z1: np.ndarray) -> bool:
 def share_where_it_acts(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], z0: np.ndarray, z1: np.ndarray,
                         explained: float) -> Tuple[float, Optional[List[str]], str]:
     """The share of the systematic error a candidate explains, for the share rule
-    (:data:`MIN_EXPLAINED`), the channels it was measured on, and a note when spikes were
-    set aside. For a candidate whose fitted parameters all act on some sensor rows only in
-    encoder replay (:func:`popup.effects.acts_only_on`: friction and its clamp on the motor
-    torques, a sensor group's delay), the share ``1 − S²_after/S²_before`` of those
-    channels (it cannot explain an error of the others, whatever causes it), or, when
-    larger, the same with the isolated spikes it leaves untouched set aside (samples that
-    are :meth:`ReplayProblem.spike_mask` spikes of both residuals: impacts or glitches
-    sharper than a sample, which no smooth law reproduces and the conclusion names on
-    their own), provided the error left without them is above :data:`AT_FLOOR`: a
-    rattling gear's impact spikes on a motor torque, left by a fitted backlash, hid the
-    friction beside it (benchmarks/README.md, session 43). Else ``explained``, the share
-    of the whole error, and ``None``: a candidate that moves the arm acts on every
-    channel, and a looser share for those lets stand-ins in (docs/effects.md, step 5)."""
-    if prob.closed or any(p.effect != name for p, _ in free):
-        return explained, None, ""
-    acts = fx.acts_only_on(name, sorted({p.name for p, _ in free}), prob.channels)
+    (:data:`MIN_EXPLAINED`), the channels it was measured on, and a note when isolated
+    spikes were set aside.
+
+    For a candidate whose own fitted parameters all act on some sensor rows only in encoder
+    replay (:func:`popup.effects.acts_only_on`: friction and its clamp on the motor torques,
+    a sensor group's delay) the share is taken on those channels ``A`` (it cannot explain an
+    error of the others, whatever causes it), net of any error the fit adds on the others:
+    ``1 − (E_A,after + max(E_rest,after − E_rest,before, 0)) / E_A,before`` with ``E`` the
+    summed excess ``Σ_c (r_c² − 1)``. The others change only when earlier effects are
+    refitted jointly with it (they move the arm); a refit that buys the torques with the
+    IMUs is not credited for it. The share is also taken with the isolated spikes it leaves
+    untouched on ``A`` set aside (samples that are :meth:`ReplayProblem.spike_mask` spikes
+    of both residuals: impacts or glitches sharper than a sample, which no smooth law
+    reproduces and the conclusion names on their own), provided the error left on ``A``
+    without them is above :data:`AT_FLOOR`: a rattling gear's impact spikes on a motor
+    torque, left by a fitted backlash, hid the friction beside it (benchmarks/README.md,
+    session 43). The largest of these and ``explained`` (the share of the whole error) is
+    returned with ``A``. For any other candidate: ``explained`` and ``None``; one that moves
+    the arm acts on every channel, and a looser share for those lets stand-ins in
+    (docs/effects.md, step 5)."""
+    own = sorted({p.name for p, _ in free if p.effect == name})
+    acts = None if prob.closed or not own else fx.acts_only_on(name, own, prob.channels)
     if not acts or len(acts) == len(prob.channels):
         return explained, None, ""
     idx = [prob.channels.index(c) for c in acts]
+    rest = [j for j in range(len(prob.channels)) if j not in idx]
 
     def share(za: np.ndarray, zb: np.ndarray) -> Tuple[float, float]:
         ms0, _, _ = prob.channel_stats(za)
         ms1, _, _ = prob.channel_stats(zb)
-        s0 = max(float(np.mean(ms0[idx])) - 1.0, 0.0)
-        s1 = max(float(np.mean(ms1[idx])) - 1.0, 0.0)
-        return (1.0 - s1 / s0 if s0 > 0 and math.isfinite(s1) else 0.0), s0
+        e0 = max(float(np.sum(ms0[idx])) - len(idx), 0.0)
+        e1 = max(float(np.sum(ms1[idx])) - len(idx), 0.0) + max(float(np.sum(ms1[rest]) - np.sum(ms0[rest])), 0.0)
+        return (1.0 - e1 / e0 if e0 > 0 and math.isfinite(e1) else 0.0), e0 / len(idx)
 
-    whole, _ = share(z0, z1)
+    on_acts = max(share(z0, z1)[0], explained)
     spiky = np.zeros(np.shape(z0), dtype=bool)
     spiky[:, idx] = prob.spike_mask(z0)[:, idx] & prob.spike_mask(z1)[:, idx]
     if not spiky.any():
-        return whole, acts, ""
+        return on_acts, acts, ""
     a0, a1 = np.array(z0, dtype=float), np.array(z1, dtype=float)
     a0[spiky] = np.nan
     a1[spiky] = np.nan
     smooth, s0 = share(a0, a1)
-    if not (smooth > whole and s0 > AT_FLOOR ** 2):
-        return whole, acts, ""
-    if not whole < MIN_EXPLAINED <= smooth:
+    if not (smooth > on_acts and s0 > AT_FLOOR ** 2):
+        return on_acts, acts, ""
+    if not on_acts < MIN_EXPLAINED <= smooth:
         return smooth, acts, ""
     where = ", ".join(f"{prob.channels[j]} {int(spiky[:, j].sum())}" for j in idx if spiky[:, j].any())
     return smooth, acts, (f"it explains {100 * smooth:.0f} % of the systematic error on {', '.join(acts)}, the only channels it acts on "
-                          f"in replay, with the isolated spikes it leaves set aside ({where} sample(s); {100 * whole:.0f} % with them, "
+                          f"in replay, with the isolated spikes it leaves set aside ({where} sample(s); {100 * on_acts:.0f} % with them, "
                           f"{100 * explained:.0f} % of the whole error): the share rule is applied there")
 
 
