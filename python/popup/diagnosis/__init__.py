@@ -40,7 +40,10 @@ at the same accuracy. An effect that still cannot be tried is listed with
 residual). An effect is *significant* when the score exceeds :data:`SCORE_THRESHOLD`, it
 explains at least :data:`MIN_EXPLAINED` of the systematic error (``1 − S²_after/S²_before``;
 for an effect that acts on some sensor rows only in replay, friction and its clamp on the
-motor torques, of the error on those channels: :func:`popup.effects.acts_only_on`)
+motor torques, of the error on those channels: :func:`popup.effects.acts_only_on`, also
+when refitted jointly with the effects added, net of what that refit adds elsewhere, and
+with the isolated spikes it leaves there set aside when that share is larger: a gear's
+impacts no smooth law replays; :func:`popup.diagnosis.candidate.share_where_it_acts`)
 and it is confirmed on the held-out samples (the likelihood ratio there is positive and the
 held-out error falls), unless it does not act on them at all (a torque limit reached only in
 training blocks: the held-out samples can neither confirm nor refute it; its message says so).
