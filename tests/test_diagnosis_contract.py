@@ -275,7 +275,7 @@ def test_a_small_bite_of_a_misfit_is_not_significant_however_large_its_likelihoo
     misfit = 2.0 * np.sin(2 * np.pi * 0.7 * t + np.arange(z0.shape[1])[None, :])  # 2 noise sigmas, every channel
     base, after = noise + misfit, noise + kept * misfit
     out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=after, J=np.zeros((1, 1)),
-                                    weights=np.ones(z0.shape[1]), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
+                                    weights=np.ones(C), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
     free = popup.estimate.free_params("payload_mass")
     f = dgc._Fitted("payload_mass", "", prob, base, free, out)
     assert f.score > 100 * dg.SCORE_THRESHOLD and f.lr_val > 0 and f.v1 < f.v0  # huge and confirmed on held-out samples
@@ -809,3 +809,42 @@ def test_the_compliant_flanks_variant_is_run_at_a_step_every_plausible_flank_all
         for c in (c_lo, c_hi):
             corner = check.with_effect("backlash", contact_k=[k] * 3, contact_c=[c] * 3)
             assert step < limit(corner), (k, c, step, limit(corner))
+
+
+@pytest.mark.parametrize("frac", [0.9, 0.97])
+def test_a_torque_limit_the_measured_torque_passes_is_refused(nominal, friction_run, tmp_path, frac):
+    """A torque limit leaves the measured torque level at it wherever the command asks for
+    more; a fitted limit that the measurement passes only trims the model's peaks (MuJoCo
+    pair 612: a 22.9 N·m limit on joint 1 added in round 3 with 965 measured samples of tau1
+    above it, up to 31 N·m). Limits drawn at 90 and 97 % of joint 2's peak torque."""
+    flat_of = lambda tm: nominal.with_effect("actuator_saturation", tau_max=tm).effects_flat  # noqa: E731
+    prob = popup.ReplayProblem(nominal, friction_run)
+    peak = [float(np.nanmax(np.abs(friction_run.data[f"tau{j + 1}"].to_numpy()))) for j in range(3)]
+    # no limit in the run: a limit below a joint's peak is passed by the measurement, one
+    # above every measured sample never is
+    why = dgc.limit_passed(prob, "actuator_saturation", flat_of([1e3, frac * peak[1], 1e3]))
+    assert why.startswith("not significant: tau2 passes its tau_max") and "tau1" not in why, why
+    assert dgc.limit_passed(prob, "actuator_saturation", flat_of([1e3, 1.01 * peak[1], 1e3])) == ""
+    assert dgc.limit_passed(prob, "backlash", flat_of([1e3, frac * peak[1], 1e3])) == ""  # no limit in that law
+    # a real limit at that level: its measured torque is level at it, and the fitted limit stands
+    lim = frac * peak[1]
+    t, q = popup.synth.lab_trajectory(8.0, seed=11)
+    run = popup.synth.measured_run(nominal.with_effect("actuator_saturation", tau_max=[1e3, lim, 1e3]), t, q, tmp_path, seed=11)
+    sat = popup.ReplayProblem(nominal, run)
+    assert dgc.limit_passed(sat, "actuator_saturation", flat_of([1e3, lim, 1e3])) == ""
+    # a limit fitted well below the plateau is passed by it
+    assert dgc.limit_passed(sat, "actuator_saturation", flat_of([1e3, 0.8 * lim, 1e3])).startswith("not significant: tau2")
+    # in the candidate's test: a fit that lowers the error a lot is still refused when the
+    # measurement passes its limit, and the message says why
+    n, C = prob.residuals(prob.nominal_simulation()).shape
+    noise = np.random.default_rng(3).standard_normal((n, C))
+    trimmed = np.zeros((n, C))
+    trimmed[:, prob.channels.index("tau2")] = 3.0 * np.sin(2 * np.pi * np.asarray(prob.time) / (5 * float(np.median(np.diff(prob.time)))))
+    z0, z1 = noise + trimmed, noise + 0.2 * trimmed
+    free = popup.estimate.free_params("actuator_saturation")
+    for tm, ok in (([1e3, frac * peak[1], 1e3], False), ([1e3, 1.01 * peak[1], 1e3], True)):
+        out = popup.estimate.FitOutcome(x=np.zeros(1), flat=flat_of(tm), z=z1, J=np.zeros((1, 1)), weights=np.ones(C), nfev=0,
+                                        r=np.zeros(1), row_t=np.zeros(1))
+        f = dgc._Fitted("actuator_saturation", "", prob, z0, free, out)
+        assert f.score > dg.SCORE_THRESHOLD and f.share >= dgr.MIN_EXPLAINED
+        assert f.significant == ok and (f.unresolved == "") == ok, f.unresolved

@@ -14,7 +14,7 @@ from .. import effects as fx
 from .. import estimate as est
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
-from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, MIN_EXPLAINED, MIN_ITER, PLAY_PARAMS, PLAY_READINGS, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
+from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PLAY_PARAMS, PLAY_READINGS, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
                     STABILITY_MARGIN, STIFFEST, STRUCTURE, UNSEEN_ALTERNATIONS, VARIANTS)
 from .results import Suspect, fmt_list
 
@@ -97,6 +97,35 @@ def unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
         return ""
     return (f"not significant: its {key} ({fmt_list(gap.tolist())} rad) is narrower than {PLAY_READINGS:g} encoder readings "
             f"({fmt_list(w.tolist())} rad each): a joint moving unseen inside its reading looks the same")
+
+
+def limit_passed(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
+    """Why effect ``name``'s limits fitted to ``flat`` are passed by the measured torques ("" if
+    they are not, or ``name`` has none): on some joint, more than :data:`LIMIT_BEYOND_SHARE`
+    of the measured samples at or above its limit (and at least :data:`LIMIT_BEYOND_MIN`) pass
+    it by more than :data:`LIMIT_MARGIN` noise deviations. A torque limit leaves the
+    measured torque level at it; a limit the measurement passes trims a model's peaks it
+    does not explain."""
+    key = LIMIT_PARAMS.get(name)
+    if key is None:
+        return ""
+    lim = np.asarray(flat[fx.EFFECTS[name].params[key].slice], dtype=float)
+    out = []
+    for i, v in enumerate(lim):
+        c = f"tau{i + 1}"
+        if not math.isfinite(v) or c not in prob.channels:
+            continue
+        y = np.abs(prob.measured[prob.used, prob.channels.index(c)])
+        y = y[np.isfinite(y)]
+        sd = float(prob.noise.get(c, 0.0))
+        beyond = int(np.sum(y > v + LIMIT_MARGIN * sd))
+        near = int(np.sum(y >= v - LIMIT_MARGIN * sd))
+        if beyond >= LIMIT_BEYOND_MIN and beyond > LIMIT_BEYOND_SHARE * near:
+            out.append(f"{c} passes its {key} of {v:.4g} N·m by more than {LIMIT_MARGIN:g} noise deviations on {beyond} of the {near} samples "
+                       f"at or above it (up to {float(np.max(y)):.4g} N·m)")
+    if not out:
+        return ""
+    return "not significant: " + "; ".join(out) + ": a torque limit leaves the measured torque level at it, and this one only trims the model's peaks"
 
 
 def silent_on(mask: np.ndarray, z0: np.ndarray, z1: np.ndarray) -> bool:
@@ -186,7 +215,7 @@ class _Fitted:
         self.v1, _ = prob.error(out.z, prob.validation)
         self.explained = 1.0 - (self.e1 / self.e0) ** 2 if self.e0 > 0 and math.isfinite(self.e1) else 0.0
         self.share, self.acts, self.spike_note = share_where_it_acts(prob, name, free, z_base, out.z, self.explained)
-        self.unresolved = unresolved_play(prob, name, out.flat)
+        self.unresolved = unresolved_play(prob, name, out.flat) or limit_passed(prob, name, out.flat)
         self.silent = silent_on(prob.validation & prob.used, z_base, out.z)
         self.significant = bool(
             self.score > SCORE_THRESHOLD and self.share >= MIN_EXPLAINED

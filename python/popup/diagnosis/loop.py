@@ -19,7 +19,7 @@ from ..results import UNITS
 from .rules import (AT_FLOOR, ENCODER_NOTE, JOINT_TOP, MIN_EXPLAINED, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, PAIR_HINTS, Progress, SCORE_THRESHOLD,
                     STEP_HALVINGS, model_at_floor)
 from .results import Diagnosis, History, HistoryStep, Suspect, final_problem, step_at_floor
-from .candidate import left_out, unresolved_play
+from .candidate import left_out, limit_passed, unresolved_play
 from .conclusion import conclude
 from .rank import diagnose
 
@@ -641,12 +641,13 @@ def _prior_fits(diags: Sequence[Diagnosis]) -> Dict[str, Dict[str, List[float]]]
 
 def _still_needed(prob: ReplayProblem, effect: str, params: Sequence[str]) -> bool:
     """Whether the model of ``prob`` needs ``effect``, by the rules that would have added it:
-    a play narrower than the encoder resolves (:func:`unresolved_play`) is not needed; nor
+    a play narrower than the encoder resolves (:func:`unresolved_play`) or a torque limit the
+    measured torque passes (:func:`limit_passed`) is not needed; nor
     is an effect without which the model is at its floor (:func:`model_at_floor`, with its
     own unseen motion); otherwise the likelihood ratio of the model with it against the
     model without it (its parameters neutral, nothing refitted, so the test keeps an
     effect when in doubt) must pass the significance threshold."""
-    if unresolved_play(prob, effect, prob.model.effects_flat):
+    if unresolved_play(prob, effect, prob.model.effects_flat) or limit_passed(prob, effect, prob.model.effects_flat):
         return False
     try:
         without = fit_unseen_motion(prob.with_model(prob.model.without_effect(effect)))
