@@ -884,20 +884,31 @@ class ReplayProblem:
             return math.inf, {c: math.inf for c in self.channels}
         return systematic(ms), {c: float(math.sqrt(m)) for c, m in zip(self.channels, ms)}
 
+    def _spike_devs(self, z: np.ndarray) -> List[Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+        """Per channel of the residual ``z`` (n, C): the :attr:`used` finite rows, their
+        values and their deviations from the median of the :data:`SPIKE_WINDOW` around them
+        (``None`` for a channel with fewer rows than that)."""
+        from scipy.ndimage import median_filter
+
+        out: List[Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]] = []
+        for j in range(z.shape[1]):
+            ok = np.flatnonzero(np.isfinite(z[:, j]) & self.used)
+            if len(ok) < SPIKE_WINDOW:
+                out.append(None)
+                continue
+            x = z[ok, j]
+            out.append((ok, x, x - median_filter(x, size=SPIKE_WINDOW, mode="nearest")))
+        return out
+
     def spike_mask(self, z: np.ndarray) -> np.ndarray:
         """The isolated spikes of the residual ``z`` (n, C) in noise units, as a boolean
         (n, C) array: the :attr:`used` samples further than :data:`SPIKE_SIGMA` from the
         median of the :data:`SPIKE_WINDOW` finite samples around them (:meth:`spikes`)."""
-        from scipy.ndimage import median_filter
-
         z = np.asarray(z, dtype=float)
         hit = np.zeros(z.shape, dtype=bool)
-        for j in range(z.shape[1]):
-            ok = np.flatnonzero(np.isfinite(z[:, j]) & self.used)
-            if len(ok) < SPIKE_WINDOW:
-                continue
-            x = z[ok, j]
-            hit[ok, j] = np.abs(x - median_filter(x, size=SPIKE_WINDOW, mode="nearest")) > SPIKE_SIGMA
+        for j, d in enumerate(self._spike_devs(z)):
+            if d is not None:
+                hit[d[0], j] = np.abs(d[2]) > SPIKE_SIGMA
         return hit
 
     def spikes(self, z: Optional[np.ndarray] = None) -> Dict[str, Dict[str, Any]]:
@@ -906,20 +917,18 @@ class ReplayProblem:
         median of the :data:`SPIKE_WINDOW` around them, as ``{"count", "times" (s, first 5),
         "share"}``, ``share`` the part of the channel's excess ``Σ z² − n`` they make.
         Sensor glitches (or impacts shorter than a sample) that no smooth model fits."""
-        from scipy.ndimage import median_filter
-
         if z is None:
             z = self.residuals(self.nominal_simulation())
-        mask = self.spike_mask(z)
+        z = np.asarray(z, dtype=float)
         out: Dict[str, Dict[str, Any]] = {}
         t = np.asarray(self.time, dtype=float)
-        for j, c in enumerate(self.channels):
-            ok = np.flatnonzero(np.isfinite(z[:, j]) & self.used)
-            hit = mask[ok, j]
-            if len(ok) < SPIKE_WINDOW or not hit.any():
+        for c, d in zip(self.channels, self._spike_devs(z)):
+            if d is None:
                 continue
-            x = z[ok, j]
-            dev = x - median_filter(x, size=SPIKE_WINDOW, mode="nearest")
+            ok, x, dev = d
+            hit = np.abs(dev) > SPIKE_SIGMA
+            if not hit.any():
+                continue
             excess = float(np.sum(x * x)) - len(x)
             part = float(np.sum(x[hit] ** 2 - (x[hit] - dev[hit]) ** 2))
             out[c] = {"count": int(hit.sum()), "times": [float(v) for v in t[ok[hit]][:5]],
