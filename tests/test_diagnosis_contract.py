@@ -275,7 +275,7 @@ def test_a_small_bite_of_a_misfit_is_not_significant_however_large_its_likelihoo
     misfit = 2.0 * np.sin(2 * np.pi * 0.7 * t + np.arange(z0.shape[1])[None, :])  # 2 noise sigmas, every channel
     base, after = noise + misfit, noise + kept * misfit
     out = popup.estimate.FitOutcome(x=np.zeros(1), flat=nominal.effects_flat.copy(), z=after, J=np.zeros((1, 1)),
-                                    weights=np.ones(C), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
+                                    weights=np.ones(z0.shape[1]), nfev=0, r=np.zeros(1), row_t=np.zeros(1))
     free = popup.estimate.free_params("payload_mass")
     f = dgc._Fitted("payload_mass", "", prob, base, free, out)
     assert f.score > 100 * dg.SCORE_THRESHOLD and f.lr_val > 0 and f.v1 < f.v0  # huge and confirmed on held-out samples
