@@ -1448,3 +1448,24 @@ def test_truth_law_maps_the_mujoco_effects_written_as_popup_laws_and_counts_pair
     rows = [row(30.0, missed), row(5.0, missed), row(30.0, [([], 100.0), (["backlash"], 20.0), (["backlash", "joint_friction"], 10.0)])]
     _, summ = bench.table(rows, "mujoco")
     assert summ["counts"]["pair"]["ok"] == 1 and summ["counts"]["truth_replays_worse"] == ["r"]
+
+
+def test_replay_sensitivity_names_the_truth_error_and_what_moves_the_prediction(tmp_path):
+    """``benchmarks/replay_sensitivity.py`` on a popup-engine friction run: popup's own law
+    at the truth replays the run far below the nominal, taking friction out moves the
+    prediction by about what the nominal misses, and a 0.1 % change of a smooth law's
+    parameter moves it by a small fraction of that (on MuJoCo pair 620 a 0.1 % wider gap
+    moved it by 29 noise units, more than friction's whole 6.8)."""
+    import replay_sensitivity as rs
+    sp = F.family_specs("joint_friction", "popup", 1, 41)[0]
+    path, truth = F.make_run(sp, tmp_path)
+    rows = {what: (v, tau) for what, v, tau in rs.sensitivity(str(path))}
+    err, nom = rows["truth's error"][0], rows["nominal's error"][0]
+    assert err < 0.2 * nom and nom > 1.0, (err, nom)
+    without = rows["without joint_friction"][0]
+    assert 0.5 * nom < without < 2.0 * nom, (without, nom)
+    small = [v for what, (v, _) in rows.items() if what.startswith("joint_friction.") and "× (1 +0.001)" in what]
+    assert small and max(small) < 0.05 * without, rows
+    assert rs.sensitivity(str(path)) is not None
+    torsion = F.family_specs("torsion", "mujoco", 1, 41)[0]
+    assert rs.B.popup_law("torsion", dict(torsion.effects["torsion"]), "mujoco") is None
