@@ -32,16 +32,16 @@ import bench_diagnosis_families as B  # noqa: E402
 import families as F  # noqa: E402
 
 
-def _prediction(prob: Any, model: Any) -> Tuple[Any, np.ndarray]:
-    """``model`` replayed on ``prob``'s run (its unseen motion fitted on a MuJoCo run, as the
-    diagnosis does), at half the step while the step check asks for it."""
+def _prediction(prob: Any, model: Any, engine: str) -> Tuple[Any, np.ndarray]:
+    """``model`` replayed on ``prob``'s run (its unseen motion fitted on a run of the engine
+    ``"mujoco"``, as the diagnosis does), at half the step while the step check asks for it."""
     from popup.exceptions import StepTooLargeError
     from popup.unseen import fit_unseen_motion
 
     for _ in range(6):
         try:
             p = prob.with_model(model)
-            p = fit_unseen_motion(p) if prob.run_engine == "mujoco" else p
+            p = fit_unseen_motion(p) if engine == "mujoco" else p
             return p, p.nominal_simulation()
         except StepTooLargeError:
             model = model.with_dt(0.5 * model.dt)
@@ -69,7 +69,6 @@ def sensitivity(path: str, rel: float = 1e-3) -> Optional[List[Tuple[str, float,
     run = popup.read_run(path)
     nominal = run.model()
     base = ReplayProblem(nominal, run)
-    base.run_engine = eng  # read by _prediction
 
     def model_of(lw: Dict[str, Dict[str, Any]], dt: Optional[float] = None) -> Any:
         m = nominal
@@ -77,12 +76,12 @@ def sensitivity(path: str, rel: float = 1e-3) -> Optional[List[Tuple[str, float,
             m = m.with_effect(n, **p)
         return m if dt is None else m.with_dt(dt)
 
-    p0, s0 = _prediction(base, model_of(laws))
+    p0, s0 = _prediction(base, model_of(laws), eng)
     out = [("truth's error", p0.error(p0.residuals(s0))[0], {}), ("nominal's error", base.error()[0], {})]
-    pn, sn = _prediction(base, model_of(laws, 0.25 * p0.model.dt))
+    pn, sn = _prediction(base, model_of(laws, 0.25 * p0.model.dt), eng)
     out.append((f"step / 4 ({p0.model.dt:.3g} s → {pn.model.dt:.3g} s)", *_moved(p0, s0, sn)))
     for n in laws:
-        _, s = _prediction(base, model_of({k: v for k, v in laws.items() if k != n}, p0.model.dt))
+        _, s = _prediction(base, model_of({k: v for k, v in laws.items() if k != n}, p0.model.dt), eng)
         out.append((f"without {n}", *_moved(p0, s0, s)))
     for n, params in laws.items():
         for k, v in params.items():
@@ -90,7 +89,7 @@ def sensitivity(path: str, rel: float = 1e-3) -> Optional[List[Tuple[str, float,
             if not np.all(np.isfinite(arr)) or not np.any(arr != 0) or k in ("held", "restitution"):
                 continue
             moved = {**laws, n: {**params, k: (arr * (1.0 + rel)).tolist() if np.ndim(v) else float(v) * (1.0 + rel)}}
-            _, s = _prediction(base, model_of(moved, p0.model.dt))
+            _, s = _prediction(base, model_of(moved, p0.model.dt), eng)
             out.append((f"{n}.{k} × (1 {rel:+g})", *_moved(p0, s0, s)))
     return out
 
