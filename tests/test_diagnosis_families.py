@@ -422,6 +422,37 @@ def test_archived_results_pool_as_the_cache_did_and_are_never_overwritten(tmp_pa
     capsys.readouterr()
 
 
+def test_exposure_lists_the_rounds_where_an_effect_was_significant(tmp_path, capsys):
+    import exposure
+
+    def sus(effect, significant, message="", tested=True):
+        return {"effect": effect, "significant": significant, "tested": tested, "message": message}
+
+    rounds = [{"suspects": [sus("backlash", True), sus("actuator_saturation", False, "refused: tau1 passes it"), sus("torsion", False, "not tested: step", tested=False)]},
+              {"suspects": [sus("actuator_saturation", True), sus("joint_friction", False)]}]
+    js = {**_js([([], 10.0), (["backlash"], 2.0)]), "rounds": rounds}
+    assert exposure.exposed({"json": js}, "actuator_saturation") == [2]
+    assert exposure.exposed({"json": js}, "actuator_saturation", tested=True) == [1, 2]
+    assert exposure.exposed({"json": js}, "actuator_saturation", tested=True, message="PASSES") == [1]
+    assert exposure.exposed({"json": js}, "torsion", tested=True) == []
+    assert exposure.exposed({"json": js}, None) == [1, 2] and exposure.exposed({"json": js}, "payload_mass") == []
+    assert exposure.exposed({"json": None}, None) == []
+    # an output without rounds: its suspects are round 1
+    assert exposure.exposed({"json": {"suspects": [sus("payload_mass", True)]}}, "payload_mass") == [1]
+    eff = {"kind": "effect", "family": "backlash", "hidden": ["backlash"], "engine": "mujoco", "style": "lab"}
+    (tmp_path / "results").mkdir()
+    for i, r in enumerate([rounds, rounds[:1]]):
+        row = {"run": f"out/x/mujoco-backlash-{i:03d}", "truth": eff, "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0},
+               "json": {**js, "rounds": r}, "commit": None}
+        (tmp_path / "results" / f"mujoco-backlash-{i:03d}.json").write_text(json.dumps(row))
+    assert exposure.main([str(tmp_path), "--effect", "actuator_saturation"]) == 0
+    out = capsys.readouterr().out
+    assert "1 of 2 kept result(s)" in out and "mujoco-backlash-000" in out and "mujoco-backlash-001" not in out
+    with pytest.raises(SystemExit):
+        exposure.main([str(tmp_path), "--effect", "no_such_effect"])
+    capsys.readouterr()
+
+
 def test_diagnosis_version_pools_commits_that_differ_only_outside_the_diagnosis(tmp_path, capsys):
     import subprocess
 
