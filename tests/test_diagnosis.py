@@ -9,6 +9,7 @@ not know about, with white sensor noise and encoder quantisation
 from __future__ import annotations
 
 import json
+import re
 import math
 import subprocess
 import sys
@@ -291,8 +292,11 @@ def test_unmodelled_disturbance_is_not_forced_onto_a_library_effect(nominal, tra
     assert d.significant == [], d.to_pandas()[["effect", "significant", "score", "error_after"]]
     assert not d.residual_white
     assert "not explained by the library" in d.conclusion
-    # it says where: the disturbed channels first, and the disturbance's band
+    # it says where: the disturbed channels first, and the disturbance's frequency, to a
+    # fraction of the record's 1/T, as the line it is
     assert "imu2_az" in d.conclusion.split("worst channels", 1)[1][:60]
+    m = re.search(r"residual is concentrated in a line at ([0-9.]+) Hz", d.conclusion)
+    assert m and float(m.group(1)) == pytest.approx(1.7, rel=0.01), d.conclusion
 
 
 @settings(max_examples=300, deadline=None)

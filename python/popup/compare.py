@@ -190,7 +190,11 @@ class Comparison:
         ``rmse_at_zero``, ``at_limit`` (the best shift is ±L: no clear delay, or one
         longer than L samples).
     spectrum : DataFrame
-        Per channel: ``peak_hz``, ``dominant_band`` (``"lo-hi Hz"``), ``dominant_band_lo_hz``,
+        Per channel: ``peak_hz`` (the strongest frequency of the residual, from the
+        periodogram of the whole record, placed to a fraction of 1/T), ``line_fraction`` (the
+        share of the residual's power within ``line_halfwidth_hz`` = 2/T of that peak: near 1
+        for a periodic error, a few bins' share for a broadband one), ``dominant_band``
+        (``"lo-hi Hz"``, the octave band holding most of the Welch PSD), ``dominant_band_lo_hz``,
         ``dominant_band_hi_hz``, ``dominant_fraction`` and ``frac <band>`` columns.
     psd : DataFrame
         Welch PSD of the residuals, index ``f_hz``, [unit²/Hz].
@@ -733,6 +737,42 @@ def _chi2_sf(q: float, dof: int) -> float:
     return float(gammaincc(0.5 * dof, 0.5 * q))
 
 
+#: Half-width of a spectral line, in bins of the record's resolution 1/T: the main lobe of
+#: the Hann window (±2/T) holds 99.5 % of a sinusoid's power whatever its frequency.
+LINE_HALFWIDTH_BINS = 2.0
+
+
+def _line(x: np.ndarray, fs: float) -> Tuple[float, float]:
+    """The residual's strongest frequency [Hz] and the share of its power within
+    ±:data:`LINE_HALFWIDTH_BINS`/T of it (near 1 for a sinusoid, about 8/n for white noise
+    of n samples: 4/T of the fs/2 band). From the periodogram of the whole record (Hann window,
+    zero-padded 8×, the peak placed by a parabola through the log power of its three bins):
+    a sinusoid's frequency to a small fraction of 1/T, where Welch's averaged segments
+    resolve only 4/T."""
+    from scipy.signal import periodogram
+
+    x = np.asarray(x, dtype=float)
+    n = x.size
+    if n < 8 or not np.all(np.isfinite(x)):
+        return math.nan, math.nan
+    nfft = 1 << (int(math.ceil(math.log2(n))) + 3)
+    f, p = periodogram(x, fs=fs, window="hann", nfft=nfft, detrend="constant")
+    if p.size < 4 or not np.any(p[1:] > 0):
+        return math.nan, math.nan
+    k = 1 + int(np.argmax(p[1:-1]))
+    peak = float(f[k])
+    a, b, c = p[k - 1], p[k], p[k + 1]
+    if a > 0 and b > 0 and c > 0:
+        la, lb, lc = math.log(a), math.log(b), math.log(c)
+        den = la - 2.0 * lb + lc
+        if den < 0:
+            peak += float(np.clip(0.5 * (la - lc) / den, -0.5, 0.5)) * float(f[1] - f[0])
+    w = LINE_HALFWIDTH_BINS * fs / n
+    tot = float(np.sum(p[1:]))
+    near = (np.abs(f - peak) <= w) & (f > 0)
+    return peak, float(np.sum(p[near]) / tot) if tot > 0 else math.nan
+
+
 def _spectrum(ugrid: Dict[str, np.ndarray], valid: List[str], fs: float) -> Tuple[Any, Any]:
     pd = _pd()
     from scipy.signal import welch
@@ -765,11 +805,14 @@ def _spectrum(ugrid: Dict[str, np.ndarray], valid: List[str], fs: float) -> Tupl
                 m = (f > lo if i > 0 else f > 0) & ((f <= hi) if i < len(edges) - 2 else (f <= nyq + 1e-12))
                 fracs.append(float(np.sum(p[m]) / tot))
             j = int(np.argmax(fracs))
-            row.update(peak_hz=float(f[1 + int(np.argmax(p[1:]))]), dominant_band=labels[j], dominant_band_lo_hz=float(edges[j]),
+            peak, line = _line(x, fs)
+            row.update(peak_hz=peak, line_fraction=line, line_halfwidth_hz=LINE_HALFWIDTH_BINS * fs / x.size,
+                       dominant_band=labels[j], dominant_band_lo_hz=float(edges[j]),
                        dominant_band_hi_hz=float(edges[j + 1]), dominant_fraction=fracs[j])
             row.update({f"frac {lab}": fr for lab, fr in zip(labels, fracs)})
         else:
-            row.update(peak_hz=math.nan, dominant_band="", dominant_band_lo_hz=math.nan, dominant_band_hi_hz=math.nan, dominant_fraction=math.nan)
+            row.update(peak_hz=math.nan, line_fraction=math.nan, line_halfwidth_hz=LINE_HALFWIDTH_BINS * fs / max(x.size, 1),
+                       dominant_band="", dominant_band_lo_hz=math.nan, dominant_band_hi_hz=math.nan, dominant_fraction=math.nan)
             row.update({f"frac {lab}": math.nan for lab in labels})
         rows.append(row)
     spectrum = pd.DataFrame(rows).set_index("channel")

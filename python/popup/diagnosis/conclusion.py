@@ -8,7 +8,7 @@ from typing import Dict, List, Mapping, Optional
 
 from ..problem import SPIKE_SIGMA, ReplayProblem
 from ..results import UNITS
-from .rules import AT_FLOOR, FLOOR_MULTIPLE, OFFSET_SHARE, SCORE_THRESHOLD, SPIKE_SHARE, floor_words
+from .rules import AT_FLOOR, FLOOR_MULTIPLE, LINE_SHARE, OFFSET_SHARE, SCORE_THRESHOLD, SPIKE_SHARE, floor_words
 from .results import Diagnosis, History, Suspect, final_problem, fmt_params, step_at_floor
 
 
@@ -77,8 +77,14 @@ def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
         txt += f"; worst window t = {float(w['t_start']):.3g}–{float(w['t_end']):.3g} s ({100 * float(w['error_share']):.0f} % of the error)"
         c0 = worst[0][0]
         band = cmp.spectrum.loc[c0]
-        if str(band["dominant_band"]) and c0 not in dict(const):
-            txt += f"; {c0}'s residual mostly in {band['dominant_band']} (peak {float(band['peak_hz']):.3g} Hz)"
+        line = float(band.get("line_fraction", math.nan))
+        if c0 in dict(const):
+            pass
+        elif math.isfinite(line) and line >= LINE_SHARE:
+            txt += (f"; {c0}'s residual is concentrated in a line at {float(band['peak_hz']):.4g} Hz ({100 * line:.0f} % of its power "
+                    f"within ±{float(band['line_halfwidth_hz']):.2g} Hz)")
+        elif str(band["dominant_band"]):
+            txt += f"; {c0}'s residual mostly in {band['dominant_band']} (peak {float(band['peak_hz']):.4g} Hz)"
     except Exception:  # noqa: BLE001 - a missing view must not hide the finding
         pass
     if const:

@@ -60,6 +60,14 @@ SPIKE_SHARE = 0.5
 replay at the floor can have one: a friction reversal a sample early is a one-sample step)."""
 
 
+LINE_SHARE = 0.5
+"""Share of the worst channel's residual power within a spectral line's width of its peak
+(``Comparison.spectrum["line_fraction"]``: the Hann main lobe, ±2/T) above which the
+unexplained error is named as a line at that frequency (given to a fraction of 1/T)
+rather than as a band: a periodic force outside the library (a pump, a fan, an unbalanced
+rotor) leaves one, and so does a model error at a periodic excitation's frequency."""
+
+
 PAIR_HINTS = 2
 """The loop's pair step (:func:`popup.diagnosis.improve`): when one effect was added and a
 systematic error is left with nothing significant, it is tried replaced by a pair, one of
