@@ -457,10 +457,48 @@ def archive(dirs: Sequence[str], dest: str) -> int:
     return n
 
 
+#: Diagnosis versions declared outcome-neutral against an earlier one: ``new: (old, what
+#: changed, the check)``. A change that only touches what :func:`classify` does not read (the
+#: wording after "not explained by the library", a column of ``Comparison.spectrum``) cannot
+#: move a count; ``--by-version`` pools such a version's results with the old one's, says so,
+#: and counts a run rerun on both once. The check is ``benchmarks/equivalence.py`` on reruns of
+#: kept runs: every number the classification reads the same, bit for bit.
+OUTCOME_EQUIVALENT: Dict[str, Tuple[str, str, str]] = {
+    "c9e708942ac8": (
+        "1da529465872",
+        "fee02b5: the unexplained error's peak frequency from the whole record's periodogram, and a line named as one "
+        "(compare._line, conclusion._where, rules.LINE_SHARE); only Comparison.spectrum's columns and the words after "
+        "'not explained by the library' change, and no decision of the diagnosis reads either",
+        "benchmarks/equivalence.py --old benchmarks/results/fam_*_06debd8 --new benchmarks/results/fam_*_fee02b5",
+    ),
+}
+
+
+def _pooled_version(v: Optional[str]) -> Optional[str]:
+    """The version ``v``'s results count with (:data:`OUTCOME_EQUIVALENT`, followed to its root)."""
+    seen = set()
+    while v in OUTCOME_EQUIVALENT and v not in seen:
+        seen.add(v)
+        v = OUTCOME_EQUIVALENT[v][0]
+    return v
+
+
+def _once(rows: List[Dict[str, Any]]) -> List[Dict[str, Any]]:
+    """``rows`` with each run (its name and its truth) kept once, the first kept."""
+    seen, out = set(), []
+    for r in rows:
+        k = (Path(str(r["run"])).name, json.dumps(r.get("truth"), sort_keys=True))
+        if k not in seen:
+            seen.add(k)
+            out.append(r)
+    return out
+
+
 def pool(dirs: Sequence[str], engines: Sequence[str], by_version: bool = False) -> int:
     """The tables over every result cached under ``dirs`` (see :func:`cached_rows`); with
     ``by_version`` one set of tables per :func:`diagnosis_version`, so that a rate is only
-    claimed over runs diagnosed by the same code."""
+    claimed over runs diagnosed by the same code (or by an outcome-neutral change of it,
+    :data:`OUTCOME_EQUIVALENT`; a run diagnosed by more than one of those counts once)."""
     rows = cached_rows(dirs)
     commits = sorted({str(r.get("commit") or "unrecorded") for r in rows})
     print(f"pooled {len(rows)} results from {len(dirs)} folder(s); popup commits: {', '.join(commits)}\n")
@@ -472,9 +510,16 @@ def pool(dirs: Sequence[str], engines: Sequence[str], by_version: bool = False) 
             c = str(r.get("commit") or "unrecorded")
             if c not in memo:
                 memo[c] = diagnosis_version(c)
-            groups.setdefault(memo[c] or "unknown version", []).append(r)
-        for v, g in groups.items():
-            print(f"diagnosis version {v}: {len(g)} results, commits {', '.join(sorted({str(r.get('commit') or 'unrecorded') for r in g}))}")
+            groups.setdefault(_pooled_version(memo[c]) or "unknown version", []).append(r)
+        for v in list(groups):
+            g = groups[v]
+            merged = sorted({str(memo.get(str(r.get("commit") or "unrecorded"))) for r in g} - {v})
+            groups[v] = _once(g)
+            print(f"diagnosis version {v}: {len(groups[v])} results ({len(g) - len(groups[v])} reruns counted once), "
+                  f"commits {', '.join(sorted({str(r.get('commit') or 'unrecorded') for r in g}))}")
+            for m in merged:
+                if m in OUTCOME_EQUIVALENT:
+                    print(f"  with version {m}, outcome-neutral: {OUTCOME_EQUIVALENT[m][1]} (checked: {OUTCOME_EQUIVALENT[m][2]})")
         print()
     for v, g in groups.items():
         for eng in engines:

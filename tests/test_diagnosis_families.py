@@ -497,6 +497,46 @@ def test_diagnosis_version_pools_commits_that_differ_only_outside_the_diagnosis(
     assert f"diagnosis version {v[0]}: 2 results" in text and f"diagnosis version {v[2]}: 1 results" in text
     assert "diagnosis version unknown version: 1 results" in text
     assert text.count("engine: mujoco  (2 runs)") == 1 and text.count("engine: mujoco  (1 runs)") == 2
+    # a version declared outcome-neutral pools with the one it came from, says so, and a
+    # run diagnosed on both counts once
+    row = {"run": "r0", "truth": eff, "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0}, "json": js, "commit": c3}
+    (out / "results" / "mujoco-payload_mass-004.json").write_text(json.dumps(row))
+    eq = dict(bench.OUTCOME_EQUIVALENT)
+    try:
+        bench.diagnosis_version = lambda c, root=tmp_path: old(c, root=root)
+        bench.OUTCOME_EQUIVALENT[v[2]] = (v[0], "only words", "a rerun")
+        assert bench.main(["--pool", str(out), "--by-version", "--engine", "mujoco"]) == 0
+    finally:
+        bench.diagnosis_version = old
+        bench.OUTCOME_EQUIVALENT.clear()
+        bench.OUTCOME_EQUIVALENT.update(eq)
+    text = capsys.readouterr().out
+    assert f"diagnosis version {v[0]}: 3 results (1 reruns counted once)" in text, text
+    assert f"with version {v[2]}, outcome-neutral: only words (checked: a rerun)" in text
+    assert f"diagnosis version {v[2]}:" not in text and text.count("engine: mujoco  (3 runs)") == 1
+
+
+def test_equivalence_compares_every_number_the_classification_reads(tmp_path, capsys):
+    import equivalence
+
+    eff = {"kind": "effect", "family": "payload_mass", "hidden": ["payload_mass"], "engine": "mujoco", "style": "lab"}
+    js = {**_js([([], 10.0), (["payload_mass"], 0.2)], [("payload_mass", True)]), "rounds": [{"suspects": [{"effect": "payload_mass", "score": 12.5}]}]}
+    for d in ("old", "new"):
+        (tmp_path / d / "results").mkdir(parents=True)
+        for i in range(3):
+            row = {"run": f"out/{d}/mujoco-payload_mass-{i:03d}", "truth": {**eff, "seed": i},
+                   "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0 + i}, "json": json.loads(json.dumps(js)), "commit": d}
+            if d == "new":
+                row["json"]["conclusion"] = "other words"  # the wording is not compared
+            if d == "new" and i == 1:
+                row["json"]["rounds"][0]["suspects"][0]["score"] = 12.500000000000002  # one ulp: compared bit for bit
+            if d == "new" and i == 2:
+                row["truth"]["seed"] = 7  # another run of the same name: not paired
+            (tmp_path / d / "results" / f"mujoco-payload_mass-{i:03d}.json").write_text(json.dumps(row))
+    n, diffs, unpaired = equivalence.compare_versions([str(tmp_path / "old")], [str(tmp_path / "new")])
+    assert n == 2 and diffs == [("mujoco-payload_mass-001", ["rounds"])] and unpaired == ["mujoco-payload_mass-002"]
+    assert equivalence.main(["--old", str(tmp_path / "old"), "--new", str(tmp_path / "new")]) == 1
+    assert "1 of 2 run(s) give the same outcome" in capsys.readouterr().out
 
 
 def test_rate_bounds_are_exact_binomial_bounds_that_cover_at_their_level():
