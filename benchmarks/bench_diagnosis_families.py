@@ -464,13 +464,9 @@ def archive(dirs: Sequence[str], dest: str) -> int:
 #: and counts a run rerun on both once. The check is ``benchmarks/equivalence.py`` on reruns of
 #: kept runs: every number the classification reads the same, bit for bit.
 OUTCOME_EQUIVALENT: Dict[str, Tuple[str, str, str]] = {
-    "c9e708942ac8": (
-        "1da529465872",
-        "fee02b5: the unexplained error's peak frequency from the whole record's periodogram, and a line named as one "
-        "(compare._line, conclusion._where, rules.LINE_SHARE); only Comparison.spectrum's columns and the words after "
-        "'not explained by the library' change, and no decision of the diagnosis reads either",
-        "benchmarks/equivalence.py --old benchmarks/results/fam_*_06debd8 --new benchmarks/results/fam_*_fee02b5",
-    ),
+    # c9e708942ac8 (fee02b5, the residual's line) is NOT declared: session 45's check found 11 of
+    # 18 reruns bit-identical and 7 MuJoCo nominal runs of seed 590 (regenerated with --n 10)
+    # with nominal errors ~1e-9 apart (same outcomes); not yet explained, so not pooled.
 }
 
 
