@@ -379,6 +379,30 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
     return "\n".join(lines), {"families": summary, "counts": counts}
 
 
+def machine() -> Dict[str, List[str]]:
+    """The CPU code paths this process computes with: NumPy's dispatch targets in use and the
+    BLAS kernels (threadpoolctl). Two machines with different ones (AVX-512 vs AVX2) give the
+    same results up to the last bits (~1e-9 relative after a diagnosis), not bit for bit;
+    ``NPY_DISABLE_CPU_FEATURES`` and ``OPENBLAS_CORETYPE`` select the other machine's paths
+    (benchmarks/README.md, session 46)."""
+    sig: Dict[str, List[str]] = {}
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+        sig["numpy"] = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
+    except ImportError:  # pragma: no cover - NumPy < 2
+        sig["numpy"] = ["unknown"]
+    try:
+        import scipy.linalg  # noqa: F401  (loads SciPy's BLAS, so that it is listed)
+        import threadpoolctl
+
+        sig["blas"] = sorted({f"{i.get('internal_api')}:{i.get('architecture')}" for i in threadpoolctl.threadpool_info()
+                              if i.get("user_api") == "blas"})
+    except ImportError:
+        sig["blas"] = ["unknown"]
+    return sig
+
+
 def _commit() -> Optional[str]:
     """The popup checkout's commit (and ``+dirty`` with uncommitted changes), if it is a git
     checkout; else ``$POPUP_BENCH_COMMIT`` (a snapshot made with ``git archive``)."""
@@ -637,7 +661,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         res = diagnose(path, timeout=a.timeout, extra=extra)
         oc = classify(truth, res)
         row = {"run": str(path), "truth": truth, "diagnosis": {k: v for k, v in res.items() if k != "json"}, "outcome": oc, "json": res["json"],
-               "truth_error": truth_error(path, truth), "commit": _commit()}
+               "truth_error": truth_error(path, truth), "commit": _commit(), "machine": machine()}
         cache.write_text(json.dumps(row, default=str))
         o = oc
         verdict = "FAILED" if o["ok"] is None else ("ok" if o["ok"] else "wrong")

@@ -10,6 +10,14 @@ the classification reads - each round's effects, error and parameters, the suspe
 effect, significance, score and error after, the nominal error - bit for bit, and the
 outcome. It prints the pairs that differ and exits 1 if any does.
 
+Bit for bit holds on one kind of machine only: NumPy's SIMD code paths and OpenBLAS's
+kernels differ between an AVX-512 and an AVX2 CPU in the last bits, and a diagnosis carries
+that to ~1e-9 relative (session 46 found this behind 7 "different" nominal runs). Each kept
+result records its ``machine`` (``bench_diagnosis_families.machine``); a pair made on
+different machines is flagged, and the new version should then be rerun with the old
+machine's code paths, e.g. ``NPY_DISABLE_CPU_FEATURES=X86_V4,AVX512_ICL,AVX512_SPR
+OPENBLAS_CORETYPE=Haswell`` for results made on an AVX2 machine.
+
     python benchmarks/equivalence.py --old benchmarks/results/fam_pd623_06debd8 --new out/fam_pd623_fee02b5
 """
 from __future__ import annotations
@@ -46,9 +54,18 @@ def _key(row: Dict[str, Any]) -> Tuple[str, str]:
     return Path(str(row["run"])).name, json.dumps(row.get("truth"), sort_keys=True)
 
 
+def machine_note(old: Dict[str, Any], new: Dict[str, Any]) -> str:
+    """Why two results may differ in the last bits without a change of method: "" if both
+    were made with the same recorded CPU code paths."""
+    a, b = old.get("machine"), new.get("machine")
+    if a is None or b is None:
+        return "machine not recorded"
+    return "" if a == b else f"different machines ({a} vs {b})"
+
+
 def compare_versions(old: Sequence[str], new: Sequence[str]) -> Tuple[int, List[Tuple[str, List[str]]], List[str]]:
-    """``(pairs compared, [(run, [fields that differ])], [new runs with no old result of the
-    same name and truth])``."""
+    """``(pairs compared, [(run, [fields that differ, then a machine note if any])], [new
+    runs with no old result of the same name and truth])``."""
     olds = {_key(r): r for r in B.cached_rows(old)}
     n, diffs, unpaired = 0, [], []
     for r in B.cached_rows(new):
@@ -60,6 +77,8 @@ def compare_versions(old: Sequence[str], new: Sequence[str]) -> Tuple[int, List[
         a, b = fingerprint(o), fingerprint(r)
         bad = [k for k in a if a[k] != b[k]]
         if bad:
+            note = machine_note(o, r)
+            bad += [f"({note})"] if note else []
             diffs.append((Path(str(r["run"])).name, bad))
     return n, diffs, unpaired
 

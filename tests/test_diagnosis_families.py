@@ -525,7 +525,8 @@ def test_equivalence_compares_every_number_the_classification_reads(tmp_path, ca
         (tmp_path / d / "results").mkdir(parents=True)
         for i in range(3):
             row = {"run": f"out/{d}/mujoco-payload_mass-{i:03d}", "truth": {**eff, "seed": i},
-                   "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0 + i}, "json": json.loads(json.dumps(js)), "commit": d}
+                   "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0 + i}, "json": json.loads(json.dumps(js)), "commit": d,
+                   "machine": {"numpy": ["X86_V3"] + (["X86_V4"] if d == "new" and i == 1 else []), "blas": ["openblas:Haswell"]}}
             if d == "new":
                 row["json"]["conclusion"] = "other words"  # the wording is not compared
             if d == "new" and i == 1:
@@ -534,7 +535,14 @@ def test_equivalence_compares_every_number_the_classification_reads(tmp_path, ca
                 row["truth"]["seed"] = 7  # another run of the same name: not paired
             (tmp_path / d / "results" / f"mujoco-payload_mass-{i:03d}.json").write_text(json.dumps(row))
     n, diffs, unpaired = equivalence.compare_versions([str(tmp_path / "old")], [str(tmp_path / "new")])
-    assert n == 2 and diffs == [("mujoco-payload_mass-001", ["rounds"])] and unpaired == ["mujoco-payload_mass-002"]
+    assert n == 2 and unpaired == ["mujoco-payload_mass-002"]
+    assert diffs == [("mujoco-payload_mass-001", ["rounds", "(different machines ({'numpy': ['X86_V3'], 'blas': ['openblas:Haswell']} vs "
+                                                  "{'numpy': ['X86_V3', 'X86_V4'], 'blas': ['openblas:Haswell']}))"])], diffs
+    assert equivalence.machine_note({"machine": {"numpy": ["X86_V3"]}}, {"machine": {"numpy": ["X86_V3"]}}) == ""
+    assert equivalence.machine_note({}, {"machine": {"numpy": ["X86_V3"]}}) == "machine not recorded"
+    # this process's own code paths: NumPy's dispatch targets in use and the BLAS kernels
+    sig = bench.machine()
+    assert set(sig) == {"numpy", "blas"} and sig["blas"] and all(":" in b for b in sig["blas"]), sig
     assert equivalence.main(["--old", str(tmp_path / "old"), "--new", str(tmp_path / "new")]) == 1
     assert "1 of 2 run(s) give the same outcome" in capsys.readouterr().out
 
