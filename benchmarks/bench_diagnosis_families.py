@@ -488,9 +488,15 @@ def archive(dirs: Sequence[str], dest: str) -> int:
 #: and counts a run rerun on both once. The check is ``benchmarks/equivalence.py`` on reruns of
 #: kept runs: every number the classification reads the same, bit for bit.
 OUTCOME_EQUIVALENT: Dict[str, Tuple[str, str, str]] = {
-    # c9e708942ac8 (fee02b5, the residual's line) is NOT declared: session 45's check found 11 of
-    # 18 reruns bit-identical and 7 MuJoCo nominal runs of seed 590 (regenerated with --n 10)
-    # with nominal errors ~1e-9 apart (same outcomes); not yet explained, so not pooled.
+    "c9e708942ac8": ("1da529465872",
+                     "fee02b5: the unexplained residual's peak frequency from the whole-record periodogram, its "
+                     "line share and the line wording (compare._line, conclusion._where); classify reads neither",
+                     "18 of 18 reruns bit-identical (session 46): pd623, md624 and pe622 wrinkling + delay on "
+                     "fee02b5; the 10 MuJoCo nominal runs of seed 590 on d20e93d with the AVX2 code paths the old "
+                     "results were made with (session 45's 1e-9 differences were the machine, not the method)"),
+    "22f9cb0b06c6": ("c9e708942ac8",
+                     "d20e93d: requirements-dev.txt gains threadpoolctl (the benchmark's machine record)",
+                     "git diff fee02b5 d20e93d on the diagnosis paths is that one line"),
 }
 
 
