@@ -52,7 +52,8 @@ are BIC gains over the same nominal model, so the difference is the evidence for
 the other) are ones the run cannot tell apart, and the conclusions say so
 (:func:`popup.diagnosis.conclusion.tied_with_best`): the best is still added.
 
-**Refinement.** A significant effect is also fitted in its richer variants
+**Refinement.** A significant effect (or one whose base law beats the nominal model by
+:data:`SCORE_THRESHOLD` but fails the share or held-out test) is also fitted in its richer variants
 (:data:`VARIANTS`: friction with Stribeck terms, three segments for bending, a centre-of-mass
 offset for the payload, compliant flanks for a gear with play, run at the step its
 ``stiffest`` values allow); a variant is kept when its score beats the base's by more than

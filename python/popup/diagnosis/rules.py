@@ -178,7 +178,8 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
     "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
                 {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
 }
-"""Richer variants tried when an effect is significant: ``extra`` parameters fitted with
+"""Richer variants tried when an effect is significant (or its base law beats the nominal
+model by :data:`SCORE_THRESHOLD`, whatever its share and held-out test): ``extra`` parameters fitted with
 the base ones (from the base fit and the variant's ``seeds``), or another ``structure``; an
 ``alternative`` (another law for the same effect) is tried whether the base is significant
 or not, and so is a refinement marked ``always`` (one whose base law cannot stand in for
