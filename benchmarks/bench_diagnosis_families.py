@@ -500,6 +500,29 @@ OUTCOME_EQUIVALENT: Dict[str, Tuple[str, str, str]] = {
 }
 
 
+#: Diagnosis versions whose results carry forward to a newer one where they never took the
+#: path the change touched: ``old: (new, what changed, the argument and the check, marker)``.
+#: A result of ``old`` none of whose notes contains ``marker`` (the line every call of the
+#: changed step leaves) went through code the change leaves as it was, and counts with
+#: ``new``; one that took the path stays with ``old``. The check is
+#: ``benchmarks/equivalence.py`` on reruns of such results on ``new``.
+CARRIED_FORWARD: Dict[str, Tuple[str, str, str, str]] = {}
+
+
+def _carried(v: Optional[str], row: Dict[str, Any]) -> Optional[str]:
+    """The version ``row`` (a result of version ``v``) counts with under
+    :data:`CARRIED_FORWARD`, followed while its notes never show the changed path."""
+    notes = [str(n) for n in ((row.get("json") or {}).get("notes") or [])]
+    seen = set()
+    while v in CARRIED_FORWARD and v not in seen:
+        seen.add(v)
+        new, _, _, marker = CARRIED_FORWARD[v]
+        if any(marker in n for n in notes):
+            break
+        v = _pooled_version(new)
+    return v
+
+
 def _pooled_version(v: Optional[str]) -> Optional[str]:
     """The version ``v``'s results count with (:data:`OUTCOME_EQUIVALENT`, followed to its root)."""
     seen = set()
@@ -524,7 +547,9 @@ def pool(dirs: Sequence[str], engines: Sequence[str], by_version: bool = False) 
     """The tables over every result cached under ``dirs`` (see :func:`cached_rows`); with
     ``by_version`` one set of tables per :func:`diagnosis_version`, so that a rate is only
     claimed over runs diagnosed by the same code (or by an outcome-neutral change of it,
-    :data:`OUTCOME_EQUIVALENT`; a run diagnosed by more than one of those counts once)."""
+    :data:`OUTCOME_EQUIVALENT`, or an older version's results that never took the path a
+    change touched, :data:`CARRIED_FORWARD`; a run diagnosed by more than one of those counts
+    once, its result on the version itself first)."""
     rows = cached_rows(dirs)
     commits = sorted({str(r.get("commit") or "unrecorded") for r in rows})
     print(f"pooled {len(rows)} results from {len(dirs)} folder(s); popup commits: {', '.join(commits)}\n")
@@ -536,16 +561,24 @@ def pool(dirs: Sequence[str], engines: Sequence[str], by_version: bool = False) 
             c = str(r.get("commit") or "unrecorded")
             if c not in memo:
                 memo[c] = diagnosis_version(c)
-            groups.setdefault(_pooled_version(memo[c]) or "unknown version", []).append(r)
+            groups.setdefault(_carried(_pooled_version(memo[c]), r) or "unknown version", []).append(r)
         for v in list(groups):
             g = groups[v]
             merged = sorted({str(memo.get(str(r.get("commit") or "unrecorded"))) for r in g} - {v})
-            groups[v] = _once(g)
+            # a run diagnosed on this version itself counts before a result carried to it
+            groups[v] = _once(sorted(g, key=lambda r: memo.get(str(r.get("commit") or "unrecorded")) != v))
             print(f"diagnosis version {v}: {len(groups[v])} results ({len(g) - len(groups[v])} reruns counted once), "
                   f"commits {', '.join(sorted({str(r.get('commit') or 'unrecorded') for r in g}))}")
+            told = set()
             for m in merged:
                 if m in OUTCOME_EQUIVALENT:
                     print(f"  with version {m}, outcome-neutral: {OUTCOME_EQUIVALENT[m][1]} (checked: {OUTCOME_EQUIVALENT[m][2]})")
+                root = _pooled_version(m)
+                if root in CARRIED_FORWARD and root not in told and _carried(root, {}) == v:
+                    told.add(root)
+                    n = sum(1 for r in g if _pooled_version(memo.get(str(r.get("commit") or "unrecorded"))) == root)
+                    print(f"  with {n} results of version {m} that never took the changed path (no note with "
+                          f"{CARRIED_FORWARD[root][3]!r}), carried forward: {CARRIED_FORWARD[root][1]} (checked: {CARRIED_FORWARD[root][2]})")
         print()
     for v, g in groups.items():
         for eng in engines:

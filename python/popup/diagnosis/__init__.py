@@ -128,10 +128,14 @@ test. *Pair from none*: when nothing was significant in round 1 and the error is
 floor, two effects may each replay worse alone than neither (a sensor delay beside a
 bending law that moves the phase of the channels it shares the other way); for each of the
 :data:`PAIR_HINTS` best candidates that pass the likelihood threshold, the nominal model
-with it is diagnosed over the other candidates that passed it, each fitted jointly from its
-seeds, and the best pair is added in round 1 when it beats the nominal model on the same
-test and explains at least :data:`MIN_EXPLAINED` of its systematic error, as one effect
-must. The swap and the base law offer only
+with it is diagnosed over the other candidates that passed it (screened from their fits
+alone, the best fitted jointly with it), and the first pair that beats the nominal model on
+the same test and explains at least :data:`MIN_EXPLAINED` of its systematic error, as one
+effect must, is added in round 1. Where none does, each such candidate is tried with those
+tested below the threshold, fitted jointly from their seeds (a partner can replay worse
+alone than the nominal, its fit in another basin: a soft torsion beside a missing payload),
+and of the pairs that qualify the one of the largest BIC gain over the nominal is added.
+The swap and the base law offer only
 candidates some round found significant (an effect another stood in for explained much of
 the same error when that one was chosen), each (effect, candidate) pair once; what they
 tried and why it was or was not kept is in ``History.notes``. Each history step names its

@@ -75,7 +75,8 @@ which is among this many best candidates that pass the likelihood threshold besi
 explain too little of what is left to be significant (each hint costs a joint fit of every
 candidate significant in some round). With nothing added (nothing significant in round 1),
 the same number of best candidates that pass the likelihood threshold are each tried with
-each other one that does (``_pair_from_none``)."""
+each other one that does, and where no pair qualifies, with each candidate tested below the
+threshold, fitted jointly from its seeds (``_pair_from_none``)."""
 
 
 OFFSET_SHARE = 0.5
