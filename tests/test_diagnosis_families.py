@@ -453,27 +453,34 @@ def test_exposure_lists_the_rounds_where_an_effect_was_significant(tmp_path, cap
     capsys.readouterr()
 
 
-def test_diagnosis_version_pools_commits_that_differ_only_outside_the_diagnosis(tmp_path, capsys):
+def _git_history(root, steps):
+    """A git repository at ``root`` with one commit per step, each step a mapping of paths
+    (relative to ``root``) to their new text; returns the short commit ids, oldest first."""
     import subprocess
 
     def git(*args):
-        return subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True, text=True).stdout.strip()
+        return subprocess.run(["git", *args], cwd=root, check=True, capture_output=True, text=True).stdout.strip()
 
     git("init", "-q")
-    git("config", "user.email", "t@t"), git("config", "user.name", "t")
-    for d in ("python/popup", "crates/popup-core", "docs"):
-        (tmp_path / d).mkdir(parents=True)
-    (tmp_path / "python/popup/loop.py").write_text("A = 1\n")
-    (tmp_path / "crates/popup-core/lib.rs").write_text("// core\n")
-    (tmp_path / "docs/x.md").write_text("one\n")
-    git("add", "."), git("commit", "-qm", "one")
-    c1 = git("rev-parse", "--short", "HEAD")
-    (tmp_path / "docs/x.md").write_text("two\n")
-    git("commit", "-qam", "docs only")
-    c2 = git("rev-parse", "--short", "HEAD")
-    (tmp_path / "python/popup/loop.py").write_text("A = 2\n")
-    git("commit", "-qam", "code")
-    c3 = git("rev-parse", "--short", "HEAD")
+    git("config", "user.email", "t@t")
+    git("config", "user.name", "t")
+    ids = []
+    for i, files in enumerate(steps):
+        for path, text in files.items():
+            (root / path).parent.mkdir(parents=True, exist_ok=True)
+            (root / path).write_text(text)
+        git("add", "-A")
+        git("commit", "-qm", f"step {i}")
+        ids.append(git("rev-parse", "--short", "HEAD"))
+    return ids
+
+
+def test_diagnosis_version_pools_commits_that_differ_only_outside_the_diagnosis(tmp_path, capsys):
+    c1, c2, c3 = _git_history(tmp_path, [
+        {"python/popup/loop.py": "A = 1\n", "crates/popup-core/lib.rs": "// core\n", "docs/x.md": "one\n"},
+        {"docs/x.md": "two\n"},  # docs only
+        {"python/popup/loop.py": "A = 2\n"},  # code
+    ])
     v = [bench.diagnosis_version(c, root=tmp_path) for c in (c1, c2, c3)]
     assert v[0] is not None and v[0] == v[1] != v[2]
     assert bench.diagnosis_version(c1 + "+dirty", root=tmp_path) is None
@@ -520,22 +527,10 @@ def test_results_that_never_took_a_changed_path_carry_forward_to_the_new_version
     """CARRIED_FORWARD: an old version's results whose notes never show the step a change
     touched count with the new version; one whose notes do stays with the old; a run
     diagnosed on both counts once, with its result on the new version."""
-    import subprocess
-
-    def git(*args):
-        return subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True, text=True).stdout.strip()
-
-    git("init", "-q")
-    git("config", "user.email", "t@t"), git("config", "user.name", "t")
-    for d in ("python/popup", "crates/popup-core"):
-        (tmp_path / d).mkdir(parents=True)
-    (tmp_path / "python/popup/loop.py").write_text("A = 1\n")
-    (tmp_path / "crates/popup-core/lib.rs").write_text("// core\n")
-    git("add", "."), git("commit", "-qm", "one")
-    c1 = git("rev-parse", "--short", "HEAD")
-    (tmp_path / "python/popup/loop.py").write_text("A = 2\n")
-    git("commit", "-qam", "pair step")
-    c2 = git("rev-parse", "--short", "HEAD")
+    c1, c2 = _git_history(tmp_path, [
+        {"python/popup/loop.py": "A = 1\n", "crates/popup-core/lib.rs": "// core\n"},
+        {"python/popup/loop.py": "A = 2\n"},  # the pair step
+    ])
     v1, v2 = (bench.diagnosis_version(c, root=tmp_path) for c in (c1, c2))
     assert v1 != v2
     out = tmp_path / "fam"
