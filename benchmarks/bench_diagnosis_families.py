@@ -521,8 +521,13 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, str]] = {
 
 def _carried(v: Optional[str], row: Dict[str, Any]) -> Optional[str]:
     """The version ``row`` (a result of version ``v``) counts with under
-    :data:`CARRIED_FORWARD`, followed while its notes never show the changed path."""
-    notes = [str(n) for n in ((row.get("json") or {}).get("notes") or [])]
+    :data:`CARRIED_FORWARD`, followed while its notes never show the changed path. A result
+    that did not finish (cut off by a time limit, a failure) stays with ``v``: it may have
+    stopped inside the changed step before the step left its note."""
+    js = row.get("json") or {}
+    notes = [str(n) for n in (js.get("notes") or [])]
+    if js.get("complete") is False or (row.get("diagnosis") or {}).get("failure"):
+        return v
     seen = set()
     while v in CARRIED_FORWARD and v not in seen:
         seen.add(v)
