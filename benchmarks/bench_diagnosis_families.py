@@ -403,6 +403,20 @@ def machine() -> Dict[str, List[str]]:
     return sig
 
 
+def libraries() -> Dict[str, str]:
+    """The versions this process computes with (Python, NumPy, SciPy, pandas, popup): a result
+    made outside the pinned environment (``requirements-dev.txt``) says so."""
+    import platform
+
+    out = {"python": platform.python_version()}
+    for name in ("numpy", "scipy", "pandas", "popup"):
+        try:
+            out[name] = str(__import__(name).__version__)
+        except (ImportError, AttributeError):
+            out[name] = "unknown"
+    return out
+
+
 def _commit() -> Optional[str]:
     """The popup checkout's commit (and ``+dirty`` with uncommitted changes), if it is a git
     checkout; else ``$POPUP_BENCH_COMMIT`` (a snapshot made with ``git archive``)."""
@@ -715,7 +729,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         res = diagnose(path, timeout=a.timeout, extra=extra)
         oc = classify(truth, res)
         row = {"run": str(path), "truth": truth, "diagnosis": {k: v for k, v in res.items() if k != "json"}, "outcome": oc, "json": res["json"],
-               "truth_error": truth_error(path, truth), "commit": _commit(), "machine": machine()}
+               "truth_error": truth_error(path, truth), "commit": _commit(), "machine": machine(), "libraries": libraries()}
         cache.write_text(json.dumps(row, default=str))
         o = oc
         verdict = "FAILED" if o["ok"] is None else ("ok" if o["ok"] else "wrong")

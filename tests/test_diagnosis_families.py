@@ -592,6 +592,9 @@ def test_equivalence_compares_every_number_the_classification_reads(tmp_path, ca
     # this process's own code paths: NumPy's dispatch targets in use and the BLAS kernels
     sig = bench.machine()
     assert set(sig) == {"numpy", "blas"} and sig["blas"] and all(":" in b for b in sig["blas"]), sig
+    # and the versions it computes with, kept beside (not in) the machine, which pairs results
+    lib = bench.libraries()
+    assert set(lib) == {"python", "numpy", "scipy", "pandas", "popup"} and lib["numpy"] == np.__version__, lib
     assert equivalence.main(["--old", str(tmp_path / "old"), "--new", str(tmp_path / "new")]) == 1
     assert "1 of 2 run(s) give the same outcome" in capsys.readouterr().out
 
