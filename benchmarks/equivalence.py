@@ -13,8 +13,9 @@ outcome. It prints the pairs that differ and exits 1 if any does.
 Bit for bit holds on one kind of machine only: NumPy's SIMD code paths and OpenBLAS's
 kernels differ between an AVX-512 and an AVX2 CPU in the last bits, and a diagnosis carries
 that to ~1e-9 relative (session 46 found this behind 7 "different" nominal runs). Each kept
-result records its ``machine`` (``bench_diagnosis_families.machine``); a pair made on
-different machines is flagged, and the new version should then be rerun with the old
+result records its ``machine`` (``bench_diagnosis_families.machine``) and, since session 52,
+its ``libraries`` (NumPy, SciPy, pandas and Python versions); a pair made on different
+machines or libraries is flagged, and the new version should then be rerun with the old
 machine's code paths, e.g. ``NPY_DISABLE_CPU_FEATURES=X86_V4,AVX512_ICL,AVX512_SPR
 OPENBLAS_CORETYPE=Haswell`` for results made on an AVX2 machine.
 
@@ -56,11 +57,17 @@ def _key(row: Dict[str, Any]) -> Tuple[str, str]:
 
 def machine_note(old: Dict[str, Any], new: Dict[str, Any]) -> str:
     """Why two results may differ in the last bits without a change of method: "" if both
-    were made with the same recorded CPU code paths."""
+    were made with the same recorded CPU code paths (and, where both record them, the same
+    library versions)."""
     a, b = old.get("machine"), new.get("machine")
     if a is None or b is None:
         return "machine not recorded"
-    return "" if a == b else f"different machines ({a} vs {b})"
+    notes = [] if a == b else [f"different machines ({a} vs {b})"]
+    la, lb = old.get("libraries"), new.get("libraries")
+    if la is not None and lb is not None and la != lb:
+        notes.append("different libraries (" + ", ".join(f"{k} {la.get(k)} vs {lb.get(k)}" for k in sorted(set(la) | set(lb))
+                                                         if la.get(k) != lb.get(k)) + ")")
+    return "; ".join(notes)
 
 
 def compare_versions(old: Sequence[str], new: Sequence[str]) -> Tuple[int, List[Tuple[str, List[str]]], List[str]]:

@@ -589,6 +589,10 @@ def test_equivalence_compares_every_number_the_classification_reads(tmp_path, ca
                                                   "{'numpy': ['X86_V3', 'X86_V4'], 'blas': ['openblas:Haswell']}))"])], diffs
     assert equivalence.machine_note({"machine": {"numpy": ["X86_V3"]}}, {"machine": {"numpy": ["X86_V3"]}}) == ""
     assert equivalence.machine_note({}, {"machine": {"numpy": ["X86_V3"]}}) == "machine not recorded"
+    m = {"numpy": ["X86_V3"]}
+    assert equivalence.machine_note({"machine": m, "libraries": {"numpy": "2.4.6", "scipy": "1.17.1"}},
+                                    {"machine": m, "libraries": {"numpy": "2.5.2", "scipy": "1.17.1"}}) == "different libraries (numpy 2.4.6 vs 2.5.2)"
+    assert equivalence.machine_note({"machine": m, "libraries": {"numpy": "2.4.6"}}, {"machine": m}) == ""  # one side unrecorded: not compared
     # this process's own code paths: NumPy's dispatch targets in use and the BLAS kernels
     sig = bench.machine()
     assert set(sig) == {"numpy", "blas"} and sig["blas"] and all(":" in b for b in sig["blas"]), sig
