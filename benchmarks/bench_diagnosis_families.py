@@ -87,10 +87,22 @@ def _extract_json(text: str) -> Optional[Dict[str, Any]]:
     return None
 
 
+def time_limit(timeout: float) -> float:
+    """The ``popup diagnose --time-limit`` [s] under a bench ``timeout`` [s]: 90 % of it,
+    leaving the diagnosis time to finish its round's bookkeeping and print its JSON."""
+    return max(1.0, 0.9 * float(timeout))
+
+
 def diagnose(run: Path, *, timeout: float, extra: Sequence[str] = ()) -> Dict[str, Any]:
     """Run ``python3 -m popup diagnose RUN --json`` (niced); returns ``rc``, ``seconds``,
     ``json`` (the parsed object or None), ``stderr`` (tail) and ``failure`` (None, or why
-    there is nothing to classify)."""
+    there is nothing to classify). Unless ``extra`` sets its own, the diagnosis gets
+    ``--time-limit`` :func:`time_limit` ``(timeout)``, so that a slow run stops itself and
+    returns the rounds it finished (exit 1, classified on them); ``timeout`` stays the hard
+    kill behind it (session 56: popup pair 660-009 was killed with two good rounds done)."""
+    extra = list(extra)
+    if not any(x == "--time-limit" or x.startswith("--time-limit=") for x in extra):
+        extra += ["--time-limit", f"{time_limit(timeout):.0f}"]
     cmd = [sys.executable, "-m", "popup", "diagnose", str(run), "--json", *extra]
     if hasattr(os, "nice"):
         cmd = ["nice", "-n", "10", *cmd]

@@ -1637,3 +1637,26 @@ def test_replay_sensitivity_names_the_truth_error_and_what_moves_the_prediction(
     assert small and max(small) < 0.05 * without, rows
     torsion = F.family_specs("torsion", "mujoco", 1, 41)[0]
     assert rs.B.popup_law("torsion", dict(torsion.effects["torsion"]), "mujoco") is None
+
+
+def test_the_bench_gives_the_diagnosis_a_time_limit_inside_its_timeout(monkeypatch, tmp_path):
+    """A bench timeout must not lose finished rounds: the diagnosis is asked to stop itself
+    (``--time-limit``) before the bench's hard kill, unless the caller set its own limit."""
+    seen = []
+
+    class _Done:
+        returncode, stdout, stderr = 1, '{"history": [], "error": "time limit"}', ""
+
+    def fake_run(cmd, **kw):
+        seen.append((list(cmd), kw.get("timeout")))
+        return _Done()
+
+    monkeypatch.setattr(bench.subprocess, "run", fake_run)
+    res = bench.diagnose(tmp_path, timeout=1000, extra=["--threads", "1"])
+    cmd, hard = seen[-1]
+    i = cmd.index("--time-limit")
+    assert 0 < float(cmd[i + 1]) < hard == 1000
+    assert res["rc"] == 1 and res["failure"] is None
+    bench.diagnose(tmp_path, timeout=1000, extra=["--time-limit", "50"])
+    cmd, _ = seen[-1]
+    assert cmd.count("--time-limit") == 1 and cmd[cmd.index("--time-limit") + 1] == "50"
