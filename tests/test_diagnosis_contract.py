@@ -600,6 +600,30 @@ def test_a_candidate_refitted_with_the_added_effects_applies_them_as_refitted(no
     assert s.to_dict()["refitted"]["payload_mass"]["delta_kg"] == s.refitted["payload_mass"]["delta_kg"]
 
 
+def test_a_candidate_is_not_credited_with_the_refit_gain_of_the_added_effects(nominal, tmp_path):
+    """A candidate refitted jointly with an added effect that sat off its optimum gains the
+    refit's improvement too; the test compares it with the added effect refitted alone (at
+    the joint fit's values, the candidate neutral). With a payload the only truth and its
+    earlier fit off (0.2 of 0.3 kg), air drag refitted beside it must not be significant:
+    the gain is the payload's (MuJoCo pair 661-010, where drag at cd ≈ 2e-12 scored 290).
+    Friction, which the same run with friction needs, stays significant."""
+    t, q = popup.synth.lab_trajectory(6.0, rate=250.0, seed=27)
+    truth = nominal.with_effect("payload_mass", delta_kg=0.3)
+    run = popup.synth.measured_run(truth, t, q, tmp_path / "payload", seed=27)
+    current = nominal.with_effect("payload_mass", delta_kg=0.2)  # an earlier round's fit that sits off
+    d = dg.diagnose(current, run, effects=["air_drag"], refit={"payload_mass": ["delta_kg"]})
+    s = d["air_drag"]
+    assert s.refitted["payload_mass"]["delta_kg"][0] == pytest.approx(0.3, abs=0.02), s.refitted
+    assert "refitted alone" in s.message, s.message
+    assert not s.significant and s.score < dgr.SCORE_THRESHOLD, (s.score, s.message)
+    assert d.best is None
+    # a candidate the run does need still passes against the same null point
+    truth_f = truth.with_effect("joint_friction", tau_c=[1.0, 1.5, 0.5], b=[0.2, 0.2, 0.1])
+    run_f = popup.synth.measured_run(truth_f, t, q, tmp_path / "friction", seed=27)
+    f = dg.diagnose(current, run_f, effects=["joint_friction"], refit={"payload_mass": ["delta_kg"]})["joint_friction"]
+    assert f.significant and f.score > 10 * dgr.SCORE_THRESHOLD, (f.score, f.message)
+
+
 def test_joint_fits_every_candidate_with_the_added_effects_from_its_seeds(nominal, tmp_path):
     """``diagnose(joint=True)`` (the base-law step's candidates never significant before): each
     candidate is fitted jointly with the effects of ``refit`` from its seeds, not first with
