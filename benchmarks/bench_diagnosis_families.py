@@ -48,7 +48,7 @@ import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
@@ -530,9 +530,68 @@ OUTCOME_EQUIVALENT: Dict[str, Tuple[str, str, str]] = {
 #: path the change touched: ``old: (new, what changed, the argument and the check, marker)``.
 #: A result of ``old`` none of whose notes contains ``marker`` (the line every call of the
 #: changed step leaves) went through code the change leaves as it was, and counts with
-#: ``new``; one that took the path stays with ``old``. The check is
-#: ``benchmarks/equivalence.py`` on reruns of such results on ``new``.
-CARRIED_FORWARD: Dict[str, Tuple[str, str, str, str]] = {
+#: ``new``; one that took the path stays with ``old``. ``marker`` may also be a
+#: :class:`PathTest` where no single note marks the path (what its result shows instead).
+#: The check is ``benchmarks/equivalence.py`` on reruns of such results on ``new``.
+class PathTest:
+    """Whether a result took a changed path, read from its JSON (``took(row)``), and the
+    words that say what a result that did not take it shows (``words``)."""
+
+    def __init__(self, took: Callable[[Dict[str, Any]], bool], words: str) -> None:
+        self.took, self.words = took, words
+
+
+_LATER_FLOORS = re.compile(r"round ([0-9]+): the noise floors re-estimated")
+#: How a pair-step note ends where that step fitted nothing significant (or nothing).
+_NONE_IN_PAIR = ("no candidate significant; the model stands", "no other candidate passed the likelihood threshold")
+
+
+def _refit_credit_took(row: Dict[str, Any]) -> bool:
+    """Whether the classification of ``row`` may depend on a fit with earlier effects
+    refitted beside the candidate (the change of version ``eaf616668868``). Such fits happen
+    only from round 2 on and in the pair step (its notes start "a pair with"); round 1, its
+    addition and its step of the history are untouched. The change only takes significance
+    away (a candidate must pass its tests against a second null point as well), so a pair
+    step whose every note says no candidate was significant, or none was fitted
+    (:data:`_NONE_IN_PAIR`), finds none on the new version either, and the loop goes on as
+    it did. So a result's outcome is fixed by round 1 where: a nominal or disturbance run
+    (right when round 1 adds nothing; a false alarm is round 1's) has no other pair note;
+    an effect run has no other pair note, no re-estimate of
+    the noise floors after round 1 (it rescales every step) and either round 1 added
+    another effect first or nothing (a miss either way) or its step already halved the
+    error (right whatever follows). A pair, or any other kind, needs round 2: it took the
+    path once anything was added."""
+    js = row.get("json") or {}
+    notes = [str(n) for n in js.get("notes") or []]
+    if any("a pair with " in n and not n.endswith(_NONE_IN_PAIR) for n in notes):
+        return True
+    truth = row.get("truth") or {}
+    kind = truth.get("kind")
+    hist = [h for h in js.get("history") or [] if isinstance(h, dict)]
+    if kind in ("nominal", "disturbance"):
+        return False
+    if kind == "effect":
+        if any(int(m.group(1)) >= 2 for m in (_LATER_FLOORS.match(n) for n in notes) if m):
+            return True
+        hidden = [str(e) for e in truth.get("hidden") or []]
+        if len(hist) < 2 or not hist[1].get("effects") or not hidden or str(hist[1]["effects"][0]) != hidden[0]:
+            return False
+        e1, nom = _f(hist[1].get("error")), _f(js.get("nominal_error"))
+        return not (math.isfinite(e1) and math.isfinite(nom) and nom > 0 and e1 <= 0.5 * nom)
+    return any(h.get("effects") for h in hist)
+
+
+def _took(marker: Union[str, PathTest], row: Dict[str, Any]) -> bool:
+    if isinstance(marker, PathTest):
+        return marker.took(row)
+    return any(marker in str(n) for n in ((row.get("json") or {}).get("notes") or []))
+
+
+def _marker_words(marker: Union[str, PathTest]) -> str:
+    return marker.words if isinstance(marker, PathTest) else f"no note with {marker!r}"
+
+
+CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
     "df46bf50dd3c": ("eaf616668868",
                      "0aedd9b: loop._pair_from_none gains a second stage (the hints with the candidates below the "
                      "likelihood threshold, fitted jointly from their seeds) run only where its first, unchanged, "
@@ -542,6 +601,15 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, str]] = {
                      "code paths): popup seed 631 drag, saturation, torsion, nominal and disturbance, "
                      "bit-identical",
                      "a pair with "),
+    "eaf616668868": ("1bb657b022f9",
+                     "4d371e1: a candidate fitted with earlier effects refitted beside it (round 2 on, the pair "
+                     "step) must also pass its tests against those effects refitted alone (its own at neutral); "
+                     "candidate._Fitted's tests moved into _against with the same arithmetic; refit_jointly keeps "
+                     "the joint fit's own notes",
+                     "such fits come only after an effect was added or in the pair step (note 'a pair with'); round 1, "
+                     "its addition and its history step are untouched, so a result whose outcome round 1 fixes "
+                     "counts (_refit_credit_took). Reruns on 4d371e1: see benchmarks/README.md session 57",
+                     PathTest(_refit_credit_took, "its outcome fixed by round 1")),
 }
 
 
@@ -551,14 +619,13 @@ def _carried(v: Optional[str], row: Dict[str, Any]) -> Optional[str]:
     that did not finish (cut off by a time limit, a failure) stays with ``v``: it may have
     stopped inside the changed step before the step left its note."""
     js = row.get("json") or {}
-    notes = [str(n) for n in (js.get("notes") or [])]
     if js.get("complete") is False or (row.get("diagnosis") or {}).get("failure"):
         return v
     seen = set()
     while v in CARRIED_FORWARD and v not in seen:
         seen.add(v)
         new, _, _, marker = CARRIED_FORWARD[v]
-        if any(marker in n for n in notes):
+        if _took(marker, row):
             break
         v = _pooled_version(new)
     return v
@@ -618,8 +685,8 @@ def pool(dirs: Sequence[str], engines: Sequence[str], by_version: bool = False) 
                 if root in CARRIED_FORWARD and root not in told and _carried(root, {}) == v:
                     told.add(root)
                     n = sum(1 for r in g if _pooled_version(memo.get(str(r.get("commit") or "unrecorded"))) == root)
-                    print(f"  with {n} results of version {m} that never took the changed path (no note with "
-                          f"{CARRIED_FORWARD[root][3]!r}), carried forward: {CARRIED_FORWARD[root][1]} (checked: {CARRIED_FORWARD[root][2]})")
+                    print(f"  with {n} results of version {m} that never took the changed path ({_marker_words(CARRIED_FORWARD[root][3])}), "
+                          f"carried forward: {CARRIED_FORWARD[root][1]} (checked: {CARRIED_FORWARD[root][2]})")
         print()
     for v, g in groups.items():
         for eng in engines:

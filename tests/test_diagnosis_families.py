@@ -565,6 +565,61 @@ def test_results_that_never_took_a_changed_path_carry_forward_to_the_new_version
     assert f"diagnosis version {v1}: 4 results" in plain and f"diagnosis version {v2}: 2 results" in plain, plain
 
 
+def test_a_path_test_carries_forward_only_results_whose_outcome_round_one_fixed(tmp_path, capsys):
+    """CARRIED_FORWARD with a :class:`PathTest` (version eaf616668868's successor: fits with
+    earlier effects refitted beside the candidate, from round 2 on and in the pair step, are
+    tested against those effects refitted alone). A result carries forward where its
+    outcome is fixed by round 1; one whose outcome may depend on round 2 stays with its
+    version."""
+    took = bench._refit_credit_took
+    nom = {"kind": "nominal", "family": "nominal", "hidden": [], "engine": "mujoco", "style": "lab"}
+    eff = {"kind": "effect", "family": "payload_mass", "hidden": ["payload_mass"], "engine": "mujoco", "style": "lab"}
+    pair = {"kind": "pair", "family": "pairs", "hidden": ["payload_mass", "torsion"], "engine": "mujoco", "style": "lab"}
+    pair_note = ["a pair with wrinkling (...): no other candidate passed the likelihood threshold"]
+    cases = [  # (name, truth, json, notes, took the path)
+        ("n0", nom, _js([([], 1.0)]), [], False),
+        ("n1", nom, _js([([], 3.0), (["air_drag"], 1.0)]), [], False),  # a false alarm of round 1
+        ("n2", nom, _js([([], 3.0)]), pair_note, False),  # the pair step fitted nothing
+        ("n3", nom, _js([([], 3.0)]), ["a pair with wrinkling (...), each fitted with it from its seeds: no candidate significant; the model stands"], False),
+        ("n4", nom, _js([([], 3.0)]), ["a pair with wrinkling (...), each fitted with it from its seeds: torsion not kept (BIC gain 3 < 10)"], True),
+        ("d0", {**nom, "kind": "disturbance"}, _js([([], 3.0)]),
+         ["a pair with wrinkling (...): the pair wrinkling + torsion explains 20% of the systematic error (3 → 2.7), less than 40%; the model stands"], True),
+        ("e0", eff, _js([([], 10.0), (["payload_mass"], 4.0), (["payload_mass", "torsion"], 1.0)]), [], False),  # halved in round 1
+        ("e1", eff, _js([([], 10.0), (["payload_mass"], 6.0), (["payload_mass", "torsion"], 1.0)]), [], True),  # halved in round 2
+        ("e2", eff, _js([([], 10.0), (["torsion"], 1.0)]), [], False),  # another effect first: a miss whatever follows
+        ("e3", eff, _js([([], 10.0), (["payload_mass"], 4.0), (["payload_mass", "torsion"], 1.0)]),
+         ["round 2: the noise floors re-estimated from the residual of the model with payload_mass + torsion differ"], True),
+        ("p0", pair, _js([([], 10.0)]), [], False),
+        ("p1", pair, _js([([], 10.0), (["payload_mass"], 4.0)]), [], True),
+    ]
+    for name, truth, js, notes, want in cases:
+        assert took({"truth": truth, "json": {**js, "notes": notes}}) is want, name
+    c1, c2 = _git_history(tmp_path, [
+        {"python/popup/candidate.py": "A = 1\n", "crates/popup-core/lib.rs": "// core\n"},
+        {"python/popup/candidate.py": "A = 2\n"},
+    ])
+    v1, v2 = (bench.diagnosis_version(c, root=tmp_path) for c in (c1, c2))
+    out = tmp_path / "fam"
+    (out / "results").mkdir(parents=True)
+    for i, (name, truth, js, notes, _) in enumerate(cases):
+        row = {"run": name, "truth": truth, "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0}, "json": {**js, "notes": notes}, "commit": c1}
+        (out / "results" / f"mujoco-{i:03d}.json").write_text(json.dumps(row))
+    old = bench.diagnosis_version
+    try:
+        bench.diagnosis_version = lambda c, root=tmp_path: old(c, root=root)
+        bench.CARRIED_FORWARD[v1] = (v2, "the refit credit", "the argument", bench.PathTest(took, "its outcome fixed by round 1"))
+        assert bench.main(["--pool", str(out), "--by-version", "--engine", "mujoco"]) == 0
+        text = capsys.readouterr().out
+    finally:
+        bench.diagnosis_version = old
+        bench.CARRIED_FORWARD.pop(v1, None)
+    n_kept = sum(1 for c in cases if not c[4])
+    assert f"diagnosis version {v2}: {n_kept} results" in text and f"diagnosis version {v1}: {len(cases) - n_kept} results" in text, text
+    assert (f"with {n_kept} results of version {v1} that never took the changed path (its outcome fixed by round 1), "
+            "carried forward: the refit credit") in text, text
+
+
+
 def test_equivalence_compares_every_number_the_classification_reads(tmp_path, capsys):
     import equivalence
 
