@@ -548,9 +548,10 @@ _NONE_IN_PAIR = ("no candidate significant; the model stands", "no other candida
 
 def _refit_credit_took(row: Dict[str, Any]) -> bool:
     """Whether the classification of ``row`` may depend on a fit with earlier effects
-    refitted beside the candidate (the change of version ``eaf616668868``). Such fits happen
-    only from round 2 on and in the pair step (its notes start "a pair with"); round 1, its
-    addition and its step of the history are untouched. The change only takes significance
+    refitted beside the candidate, or on the base-law rival of a round's addition (the
+    changes after version ``eaf616668868``). Such fits happen only from round 2 on and in
+    the pair step (its notes start "a pair with"), the rival only from round 2 on; round 1,
+    its addition and its step of the history are untouched. The change only takes significance
     away (a candidate must pass its tests against a second null point as well), so a pair
     step whose every note says no candidate was significant, or none was fitted
     (:data:`_NONE_IN_PAIR`), finds none on the new version either, and the loop goes on as
@@ -601,14 +602,18 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "code paths): popup seed 631 drag, saturation, torsion, nominal and disturbance, "
                      "bit-identical",
                      "a pair with "),
-    "eaf616668868": ("1bb657b022f9",
-                     "4d371e1: a candidate fitted with earlier effects refitted beside it (round 2 on, the pair "
-                     "step) must also pass its tests against those effects refitted alone (its own at neutral); "
-                     "candidate._Fitted's tests moved into _against with the same arithmetic; refit_jointly keeps "
-                     "the joint fit's own notes",
-                     "such fits come only after an effect was added or in the pair step (note 'a pair with'); round 1, "
+    "eaf616668868": ("5be17461b6e3",
+                     "4d371e1 + ae3690a: a candidate fitted with earlier effects refitted beside it (round 2 on, "
+                     "the pair step) must also pass its tests against those effects refitted alone (its own at "
+                     "neutral), and from round 2 on an earlier effect's richer law is set back to its base law as "
+                     "a rival of the round's addition; candidate._Fitted's tests moved into _against with the same "
+                     "arithmetic; refit_jointly keeps the joint fit's own notes",
+                     "both act only after an effect was added, or in a pair step that fitted something; round 1, "
                      "its addition and its history step are untouched, so a result whose outcome round 1 fixes "
-                     "counts (_refit_credit_took). Reruns on 4d371e1: see benchmarks/README.md session 57",
+                     "counts (_refit_credit_took). Reruns on 4d371e1 and the working tree of ae3690a: MuJoCo "
+                     "seeds 656 and 657 air drag, bit-identical (equivalence.fingerprint); MuJoCo 624-001 "
+                     "disturbance, same notes, conclusion and significance (its old result came from an AVX2 "
+                     "machine: 1e-12 apart from the nominal replay on)",
                      PathTest(_refit_credit_took, "its outcome fixed by round 1")),
 }
 
