@@ -908,3 +908,46 @@ def test_a_base_law_the_likelihood_favours_has_its_refinements_tried(monkeypatch
     assert ("fitted link-side inertia" in calls) == tried_inertia, calls
     assert "held link side (play operator)" in calls  # an alternative law: tried either way
     assert (s.variant, s.significant) == (("fitted link-side inertia", True) if tried_inertia else ("", False)), s
+
+
+def _spectrum(rows):
+    import pandas as pd
+
+    return pd.DataFrame({"peak_hz": [r[1] for r in rows], "line_fraction": [r[2] for r in rows],
+                         "line_halfwidth_hz": [0.16] * len(rows), "dominant_band": ["1-2 Hz"] * len(rows)},
+                        index=[r[0] for r in rows])
+
+
+def test_the_unexplained_error_names_every_line_not_only_the_worst_channels():
+    """A periodic torque on a bending joint drives some channels at its own frequency and can
+    leave a mode it excites as the worst channel's line (MuJoCo disturbance 675-003: 3.34 Hz
+    on imu2_az, the 1.458 Hz forcing on imu2_ay, ee_z, tau2). The conclusion names both, each
+    line once, with the channels that carry it; channels at their floor, broadband residuals
+    and constant offsets are not named as lines."""
+    import types
+
+    import pandas as pd
+
+    from popup.diagnosis import conclusion as dgk
+
+    sp = _spectrum([("imu2_az", 3.341, 0.95), ("imu2_ay", 1.457, 0.81), ("ee_z", 1.458, 0.94), ("tau1", 3.340, 0.96),
+                    ("tau2", 1.457, 0.83), ("imu1_ay", 11.5, 0.25), ("ee_x", 5.0, 0.99)])
+    per = {"imu2_az": 32.0, "imu2_ay": 29.0, "ee_z": 27.0, "tau1": 20.0, "tau2": 10.0, "imu1_ay": 5.0, "ee_x": 0.9}
+    windows = pd.DataFrame({"rank": [1], "t_start": [8.75], "t_end": [10.0], "error_share": [0.15]})
+    d = types.SimpleNamespace(channel_error=per, problem=None, comparison=types.SimpleNamespace(windows=windows, spectrum=sp))
+    txt = dgk._where(d)
+    assert "imu2_az's residual is concentrated in a line at 3.341 Hz" in txt, txt
+    other = txt.split("other lines in the residual: ", 1)[1]
+    assert other.startswith("1.457 Hz on imu2_ay (81 %), ee_z (94 %), tau2 (83 %)"), txt
+    assert "tau1" not in other and "imu1_ay" not in other and "ee_x" not in other, txt   # c0's line, broadband, at its floor
+    # one line only: nothing more is said
+    sp1 = _spectrum([("imu2_az", 1.7, 0.95), ("ee_z", 1.701, 0.9)])
+    d1 = types.SimpleNamespace(channel_error={"imu2_az": 9.0, "ee_z": 4.0}, problem=None,
+                               comparison=types.SimpleNamespace(windows=windows, spectrum=sp1))
+    assert "other lines" not in dgk._where(d1)
+    # at most OTHER_LINES further lines, the worst channels' first
+    many = [("a", 1.0, 0.9)] + [(f"c{i}", 2.0 + i, 0.9) for i in range(4)]
+    per_m = {"a": 10.0, **{f"c{i}": 9.0 - i for i in range(4)}}
+    assert dgk._other_lines(_spectrum(many), per_m, "a", {}) == "; other lines in the residual: 2 Hz on c0 (90 %); 3 Hz on c1 (90 %)"
+    # a channel read as a constant offset is not a line
+    assert dgk._other_lines(_spectrum(many), per_m, "a", {"c0": {}}).startswith("; other lines in the residual: 3 Hz on c1")

@@ -4,7 +4,7 @@ added, how far the error fell, what is left and where)."""
 from __future__ import annotations
 
 import math
-from typing import Dict, List, Mapping, Optional
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from ..problem import SPIKE_SIGMA, ReplayProblem
 from ..results import UNITS
@@ -85,6 +85,7 @@ def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
                     f"within ±{float(band['line_halfwidth_hz']):.2g} Hz)")
         elif str(band["dominant_band"]):
             txt += f"; {c0}'s residual mostly in {band['dominant_band']} (peak {float(band['peak_hz']):.4g} Hz)"
+        txt += _other_lines(cmp.spectrum, per, c0, dict(const))
     except Exception:  # noqa: BLE001 - a missing view must not hide the finding
         pass
     if const:
@@ -97,6 +98,46 @@ def _where(d: Diagnosis, per: Optional[Dict[str, float]] = None) -> str:
             f"{c} {v['count']} sample(s) > {SPIKE_SIGMA:g}σ from their neighbours (first at t = {v['times'][0]:.4g} s), "
             f"{100 * v['share']:.0f} % of its excess" for c, v in big[:3])
     return txt
+
+
+#: Channels above their floor, worst first, searched for lines other than the worst
+#: channel's, and how many such lines the conclusion names.
+LINE_CHANNELS = 6
+OTHER_LINES = 2
+
+
+def _other_lines(spectrum: Any, per: Mapping[str, float], c0: str, const: Mapping[str, Any]) -> str:
+    """The residual's lines at other frequencies than the worst channel's, each with the
+    channels (of the :data:`LINE_CHANNELS` worst, those above :data:`FLOOR_MULTIPLE`) that carry it:
+    a periodic force shows its own frequency on the channels it drives directly and can
+    leave a mode it excites, at another, as the worst channel's line (MuJoCo disturbance
+    675-003: a 1.458 Hz torque on link 2's bending joint, 3.34 Hz on imu2_az and tau1,
+    1.457 Hz on imu2_ay, ee_z and tau2). "" when there is none."""
+    def line_of(c: str) -> Optional[Tuple[float, float, float]]:
+        if c not in spectrum.index or c in const:
+            return None
+        row = spectrum.loc[c]
+        share, f = float(row.get("line_fraction", math.nan)), float(row.get("peak_hz", math.nan))
+        return (f, share, float(row.get("line_halfwidth_hz", 0.0))) if math.isfinite(share) and share >= LINE_SHARE and math.isfinite(f) else None
+
+    first = line_of(c0)
+    named = [(first[0], first[2])] if first is not None else []
+    other: List[Tuple[float, float, List[str]]] = []
+    for c, v in sorted(per.items(), key=lambda kv: -kv[1])[:LINE_CHANNELS]:
+        ln = line_of(c) if c != c0 and v > FLOOR_MULTIPLE else None
+        if ln is None or any(abs(ln[0] - g) <= max(ln[2], wg) for g, wg in named):
+            continue
+        f, share, w = ln
+        hit = next((x for x in other if abs(f - x[0]) <= max(w, x[1])), None)
+        if hit is None:
+            if len(other) >= OTHER_LINES:
+                continue
+            hit = (f, w, [])
+            other.append(hit)
+        hit[2].append(f"{c} ({100 * share:.0f} %)")
+    if not other:
+        return ""
+    return "; other lines in the residual: " + "; ".join(f"{f:.4g} Hz on " + ", ".join(cs) for f, _, cs in other)
 
 
 def _encoder_text(ef: Mapping[str, float]) -> str:
