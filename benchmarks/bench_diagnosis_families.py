@@ -523,6 +523,12 @@ OUTCOME_EQUIVALENT: Dict[str, Tuple[str, str, str]] = {
     "22f9cb0b06c6": ("c9e708942ac8",
                      "d20e93d: requirements-dev.txt gains threadpoolctl (the benchmark's machine record)",
                      "git diff fee02b5 d20e93d on the diagnosis paths is that one line"),
+    "e7450cd85bd3": ("5be17461b6e3",
+                     "060de16: the unexplained error also names the residual's other spectral lines with the "
+                     "channels that carry them (conclusion._other_lines, text after 'not explained by the "
+                     "library'); classify reads none of it",
+                     "8 of 8 reruns bit-identical (session 58, same machine): popup disturbances of seed 674 "
+                     "and MuJoCo disturbances of seed 675 on 060de16 (fam_pde674_060de16, fam_mde675_060de16)"),
 }
 
 
