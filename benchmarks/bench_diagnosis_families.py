@@ -588,6 +588,49 @@ def _refit_credit_took(row: Dict[str, Any]) -> bool:
     return any(h.get("effects") for h in hist)
 
 
+#: The bench's encoder step (``families.encoder_resolution``) is the diagnosis's reading width
+#: where the readings are only quantised; a play counts as pinned here only this far above
+#: half of it, so a wider width the diagnosis may have estimated is on the safe side.
+_PLAY_WIDTH_MARGIN = 1.25
+#: Where a step's note lists the effects fitted as its candidates.
+_CANDIDATES = re.compile(r"(?:candidates |and one of )([a-z_, ]+)")
+
+
+def _play_unpinned_took(row: Dict[str, Any]) -> bool:
+    """Whether the classification of ``row`` may depend on a backlash fit the play's 95 %
+    interval rule (``candidate.unpinned_play``, the change after version ``5be17461b6e3``)
+    refuses. The rule only takes significance away from a backlash fitted as the candidate,
+    where every joint's gap is narrower than half a reading or its interval holds zero. A
+    fit that was not significant stays so, and the variants tried, the combinations tried
+    and the preferred variant of an effect all stay as they were unless a fit that was
+    significant is refused; the final one of those is the round's reported suspect. So a
+    result took the path where a round reports a significant backlash that no joint pins
+    (its ``ci95`` finite and below the gap, the gap at least :data:`_PLAY_WIDTH_MARGIN` ×
+    half the bench's encoder step), or a pair or rival step fitted backlash as a candidate
+    and found something significant (its fits are not reported)."""
+    js = row.get("json") or {}
+    truth = row.get("truth") or {}
+    try:
+        w = F.encoder_resolution(int(truth["encoder_bits"]))
+    except (KeyError, TypeError, ValueError):
+        return True
+    for rd in js.get("rounds") or []:
+        for s in rd.get("suspects") or []:
+            if not isinstance(s, dict) or s.get("effect") != "backlash" or not s.get("significant"):
+                continue
+            gap = (s.get("params") or {}).get("gap") or []
+            ci = (s.get("ci95") or {}).get("gap") or []
+            if not any(_f(g) >= 0.5 * w * _PLAY_WIDTH_MARGIN and _f(c) < _f(g) for g, c in zip(gap, ci)):
+                return True
+    for n in (str(x) for x in js.get("notes") or []):
+        if n.endswith(_NONE_IN_PAIR):
+            continue
+        m = _CANDIDATES.search(n)
+        if n.startswith("a pair with backlash") or (m and "backlash" in m.group(1)):
+            return True
+    return False
+
+
 def _took(marker: Union[str, PathTest], row: Dict[str, Any]) -> bool:
     if isinstance(marker, PathTest):
         return marker.took(row)

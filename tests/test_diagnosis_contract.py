@@ -874,6 +874,59 @@ def test_a_torque_limit_the_measured_torque_passes_is_refused(nominal, friction_
         assert f.significant == ok and (f.unresolved == "") == ok, f.unresolved
 
 
+def test_a_play_whose_interval_holds_zero_is_not_a_finding(nominal, friction_run):
+    """A backlash is a finding only where some joint's gap is both half an encoder reading
+    wide and clear of zero by its 95 % interval (MuJoCo nominal 677-003, 200 Hz trapezoids,
+    12-bit encoders, quiet sensors: gaps of 0.15/0.52/0.28 readings ± 0.13/5.1/11 readings
+    with a free link-side inertia were added, 0.70 → 0.54 noise units). The width rule alone
+    passed it: joint 2's play is just over half a reading."""
+    import types
+
+    w = np.full(3, 1.534e-5)
+    prob = types.SimpleNamespace(encoder_width=w)
+    flat = np.zeros(len(nominal.effects_flat))
+    sl = popup.effects.EFFECTS["backlash"].params["gap"].slice
+    flat[sl] = np.array([0.15, 0.52, 0.28]) * w
+    seen = {"gap": list(np.array([0.13, 5.11, 10.78]) * w)}
+    why = dgc.unpinned_play(prob, "backlash", flat, seen)
+    assert why.startswith("not significant: its gap") and "not pinned down" in why, why
+    assert dgc.unresolved_play(prob, "backlash", flat) == ""  # the width rule alone lets it in
+    # one joint wide and pinned is enough; a narrow joint pinned is not; inf (not
+    # identifiable) is not pinned; nan (not fitted) leaves that joint to the width rule
+    assert dgc.unpinned_play(prob, "backlash", flat, {"gap": [0.13 * w[0], 0.4 * w[1], 10.78 * w[2]]}) == ""
+    flat[sl] = np.array([0.45, 0.52, 0.28]) * w
+    assert dgc.unpinned_play(prob, "backlash", flat, {"gap": [0.01 * w[0], math.inf, 0.01 * w[2]]}).startswith("not significant")
+    assert dgc.unpinned_play(prob, "backlash", flat, {"gap": [math.nan, math.nan, math.nan]}) == ""
+    assert dgc.unpinned_play(prob, "payload_mass", flat, seen) == ""  # no play in that law
+    assert dgc.unpinned_play(types.SimpleNamespace(encoder_width=np.zeros(3)), "backlash", flat, seen) == ""  # exact encoder
+
+    # in the candidate's test: the same fit, with a gap the data pin down or not (the
+    # Jacobian's column sets its interval), is kept or refused, and says why
+    real = popup.ReplayProblem(nominal, friction_run)
+    wr = real.encoder_width
+    n, C = real.residuals(real.nominal_simulation()).shape
+    rng = np.random.default_rng(4)
+    noise = rng.standard_normal((n, C))
+    signal = np.zeros((n, C))
+    signal[:, real.channels.index("tau2")] = 3.0 * np.sin(2 * np.pi * np.asarray(real.time) / 0.5)
+    z0, z1 = noise + signal, noise + 0.2 * signal
+    free = popup.estimate.free_params("backlash", ["gap"])
+    gflat = nominal.with_effect("backlash", gap=[3.0 * wr[0], 0.0, 0.0]).effects_flat
+    for col, ok in ((1e7, True), (1e3, False)):
+        m = 400
+        J = np.zeros((m, 3))
+        J[:, 0] = col * rng.standard_normal(m)
+        J[:, 1:] = 1e7 * rng.standard_normal((m, 2))
+        out = popup.estimate.FitOutcome(x=np.asarray(gflat[sl], float), flat=gflat, z=z1, J=J, weights=np.ones(C), nfev=0,
+                                        r=1e-3 * rng.standard_normal(m), row_t=np.linspace(0.0, 8.0, m))
+        f = dgc._Fitted("backlash", "", real, z0, free, out)
+        assert f.score > dg.SCORE_THRESHOLD and f.share >= dgr.MIN_EXPLAINED and f.unresolved == ""
+        assert f.significant == ok and (f.unpinned == "") == ok, f.unpinned
+        s = f.suspect({}, 0)
+        assert s.ci95["gap"][0] < 3.0 * wr[0] if ok else s.ci95["gap"][0] >= 3.0 * wr[0], s.ci95
+        assert ("not pinned down" in s.message) != ok, s.message
+
+
 @pytest.mark.parametrize("base_score, tried_inertia", [(56.0, True), (5.0, False)])
 def test_a_base_law_the_likelihood_favours_has_its_refinements_tried(monkeypatch, base_score, tried_inertia):
     """A base fit above the BIC threshold that fails the share (or held-out) test still has
@@ -888,6 +941,7 @@ def test_a_base_law_the_likelihood_favours_has_its_refinements_tried(monkeypatch
     class Fake:
         def __init__(self, variant, score, significant):
             self.variant, self.score, self.significant, self.unresolved, self.free, self.k = variant, score, significant, "", [], 1
+            self.unpinned = ""
             # residual grids of their own (shape differs per fit): _gain compares scores
             self.out = types.SimpleNamespace(flat=np.zeros(n), z=np.zeros((len(calls), 1)))
             self.prob = types.SimpleNamespace(time=np.zeros(len(calls)))

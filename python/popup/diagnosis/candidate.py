@@ -99,6 +99,31 @@ def unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
             f"({fmt_list(w.tolist())} rad each): a joint moving unseen inside its reading looks the same")
 
 
+def unpinned_play(prob: ReplayProblem, name: str, flat: np.ndarray, half: Mapping[str, Sequence[float]]) -> str:
+    """Why the play of effect ``name`` fitted to ``flat`` is not pinned down by the run ("" if
+    it is): on no joint is it both at least :data:`PLAY_READINGS` encoder readings wide and
+    clear of zero by its 95 % half-width ``half[key][j]`` (``inf``: not identifiable; ``nan``:
+    not fitted, that joint judged by its width alone). A play whose interval holds zero is
+    no finding, however much the likelihood gains: on a MuJoCo nominal run (200 Hz
+    trapezoids, 12-bit encoders, noise × 0.32) a backlash with gaps of 0.15/0.52/0.28
+    readings ± 0.13/5.1/11 readings and a free link-side inertia scored 1 099 and was added
+    (0.70 → 0.54 noise units): tiny free spells at every reversal of the gear's torque
+    stood in for what the replay misses there (benchmarks/README.md, session 59)."""
+    key = PLAY_PARAMS.get(name)
+    if key is None or key not in half:
+        return ""
+    w = prob.encoder_width
+    gap = np.asarray(flat[fx.EFFECTS[name].params[key].slice], dtype=float)
+    h = np.asarray(half[key], dtype=float)
+    if not np.any(w > 0) or h.shape != gap.shape:
+        return ""
+    pinned = (gap >= PLAY_READINGS * w) & (np.isnan(h) | (h < gap))
+    if pinned.any():
+        return ""
+    return (f"not significant: its {key} ({fmt_list(gap.tolist())} rad ± {fmt_list(h.tolist())}) is not pinned down by this run: on no joint "
+            f"is it both {PLAY_READINGS:g} encoder readings ({fmt_list(w.tolist())} rad each) wide and clear of zero by its 95 % interval")
+
+
 def limit_passed(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
     """Why effect ``name``'s limits fitted to ``flat`` are passed by the measured torques ("" if
     they are not, or ``name`` has none): on some joint, more than :data:`LIMIT_BEYOND_SHARE`
@@ -234,7 +259,30 @@ class _Fitted:
                 self.score = min(self.score, u["score"])
                 self.share = min(self.share, u["share"])
                 passes = passes and u["passes"]
-        self.significant = bool(passes and not self.unresolved)
+        # the play's interval is only worked out where it can decide (it costs a jackknife)
+        self._uncertainty: Optional[Tuple[np.ndarray, Dict[str, Any]]] = None
+        self.unpinned = ""
+        if passes and not self.unresolved and name in PLAY_PARAMS:
+            self.unpinned = unpinned_play(prob, name, out.flat, self._half())
+        self.significant = bool(passes and not self.unresolved and not self.unpinned)
+
+    def _names(self) -> List[str]:
+        return [f"{p.name}[{i}]" if p.effect == self.name else f"{p.effect}.{p.name}[{i}]" for p, i in self.free]
+
+    def _uncertain(self) -> Tuple[np.ndarray, Dict[str, Any]]:
+        """:func:`estimate.uncertainty` of this fit (95 % half-widths and the identifiability report), worked out once."""
+        if self._uncertainty is None:
+            self._uncertainty = est.uncertainty(self.out, self.free, self._names(), self.neff)
+        return self._uncertainty
+
+    def _half(self) -> Dict[str, List[float]]:
+        """95 % half-widths of this effect's own parameters, by name (``nan`` where not fitted)."""
+        half, _ = self._uncertain()
+        ci: Dict[str, List[float]] = {}
+        for (p, i), h in zip(self.free, half):
+            if p.effect == self.name:
+                ci.setdefault(p.name, [math.nan] * p.length)[i] = float(h)
+        return ci
 
     def _against(self, z0: np.ndarray) -> Dict[str, Any]:
         """The significance tests of this fit against the null residual ``z0``: the score
@@ -263,16 +311,12 @@ class _Fitted:
                 f"in replay ({100 * self.explained:.0f} % of the whole): the share rule is applied there")
 
     def suspect(self, ev: Dict[str, Any], nfev: int, message: str = "") -> Suspect:
-        names = [f"{p.name}[{i}]" if p.effect == self.name else f"{p.effect}.{p.name}[{i}]" for p, i in self.free]
-        half, ident = est.uncertainty(self.out, self.free, names, self.neff)
-        ci: Dict[str, List[float]] = {}
-        for (p, i), h in zip(self.free, half):
-            if p.effect == self.name:
-                ci.setdefault(p.name, [math.nan] * p.length)[i] = float(h)
+        _, ident = self._uncertain()
+        ci = self._half()
         return Suspect(
             self.name, self.significant, float(self.score), est.params_dict(self.name, self.out.flat), ci, self.e0, self.e1, self.per1, ev,
             n_eff=self.neff, n_rollouts=nfev, tested=True, explained=self.explained,
-            message="; ".join(m for m in (self.unresolved, "not checked on the held-out samples: it does not act there" if self.silent else "", self._share_note(),
+            message="; ".join(m for m in (self.unresolved, self.unpinned, "not checked on the held-out samples: it does not act there" if self.silent else "", self._share_note(),
                                           self.null_note, message) if m),
             validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant,
             identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free if p.effect == self.name}),
@@ -451,7 +495,7 @@ def try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int
             best, best_var = vf, var
         else:
             notes.append(f"variant {var['name']} not preferred (score {vf.score:.1f} vs {best.score:.1f}; BIC gain over it {gain:.1f}"
-                         + (f"; {vf.unresolved}" if vf.unresolved else "") + ")")
+                         + "".join(f"; {m}" for m in (vf.unresolved, vf.unpinned) if m) + ")")
     if best_var is not None:
         best = _try_combined(prob, name, best, best_var, tried, max_iter, also, notes)
     return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
