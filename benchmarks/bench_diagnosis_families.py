@@ -626,7 +626,8 @@ def _play_unpinned_took(row: Dict[str, Any]) -> bool:
         if n.endswith(_NONE_IN_PAIR):
             continue
         m = _CANDIDATES.search(n)
-        if n.startswith("a pair with backlash") or (m and "backlash" in m.group(1)):
+        listed = re.split(r", (?:each|below) ", m.group(1))[0].split(", ") if m else []
+        if n.startswith("a pair with backlash") or "backlash" in listed:
             return True
     return False
 
@@ -753,6 +754,21 @@ def pool(dirs: Sequence[str], engines: Sequence[str], by_version: bool = False) 
 
 
 # ---------------------------------------------------------------------------- main
+def diagnose_row(path: Path, truth: Dict[str, Any], cache: Path, *, timeout: float, extra: Sequence[str] = ()) -> Dict[str, Any]:
+    """Diagnose run ``path`` (its ``truth``), classify it, write the result to ``cache`` and
+    print its line; returns the result row."""
+    res = diagnose(path, timeout=timeout, extra=extra)
+    o = classify(truth, res)
+    row = {"run": str(path), "truth": truth, "diagnosis": {k: v for k, v in res.items() if k != "json"}, "outcome": o, "json": res["json"],
+           "truth_error": truth_error(path, truth), "commit": _commit(), "machine": machine(), "libraries": libraries()}
+    cache.write_text(json.dumps(row, default=str))
+    verdict = "FAILED" if o["ok"] is None else ("ok" if o["ok"] else "wrong")
+    print(f"[{verdict:>6}] {path.name:<40} hidden={'+'.join(truth.get('hidden', [])) or '-':<34} "
+          f"added={'+'.join(o.get('added') or []) or '-':<40} err {o.get('nominal_error', math.nan):.3g} -> {o.get('min_error', math.nan):.3g}  "
+          f"{res['seconds']:.0f} s{'  ' + str(o['failure']) if o['failure'] else ''}", flush=True)
+    return row
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--engine", choices=("popup", "mujoco", "both"), default="both")
@@ -859,17 +875,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 return row
             except ValueError:
                 pass
-        res = diagnose(path, timeout=a.timeout, extra=extra)
-        oc = classify(truth, res)
-        row = {"run": str(path), "truth": truth, "diagnosis": {k: v for k, v in res.items() if k != "json"}, "outcome": oc, "json": res["json"],
-               "truth_error": truth_error(path, truth), "commit": _commit(), "machine": machine(), "libraries": libraries()}
-        cache.write_text(json.dumps(row, default=str))
-        o = oc
-        verdict = "FAILED" if o["ok"] is None else ("ok" if o["ok"] else "wrong")
-        print(f"[{verdict:>6}] {path.name:<40} hidden={'+'.join(truth.get('hidden', [])) or '-':<34} "
-              f"added={'+'.join(o.get('added') or []) or '-':<40} err {o.get('nominal_error', math.nan):.3g} -> {o.get('min_error', math.nan):.3g}  "
-              f"{res['seconds']:.0f} s{'  ' + str(o['failure']) if o['failure'] else ''}", flush=True)
-        return row
+        return diagnose_row(path, truth, cache, timeout=a.timeout, extra=extra)
 
     rows: List[Dict[str, Any]] = []
     if a.jobs > 1:

@@ -620,6 +620,43 @@ def test_a_path_test_carries_forward_only_results_whose_outcome_round_one_fixed(
 
 
 
+def test_the_play_path_test_flags_every_result_an_unpinned_backlash_could_change():
+    """The PathTest of the play-interval rule (version 5be17461b6e3's successor): a result
+    took the changed path where a round reports a significant backlash that no joint pins
+    (gap at least half a reading, with the bench's margin, and its 95 % interval below the
+    gap), or a pair or rival step fitted backlash as a candidate and kept something."""
+    took = bench._play_unpinned_took
+    w = F.encoder_resolution(12)
+    truth = {"kind": "nominal", "family": "nominal", "hidden": [], "engine": "mujoco", "encoder_bits": 12}
+
+    def row(gap, ci, significant=True, notes=()):
+        s = {"effect": "backlash", "significant": significant, "params": {"gap": [g * w for g in gap]},
+             "ci95": {"gap": [None if c is None else c * w for c in ci]}}
+        return {"truth": truth, "json": {"rounds": [{"suspects": [{"effect": "payload_mass", "significant": True}, s]}], "notes": list(notes)}}
+
+    assert took(row([0.15, 0.52, 0.28], [0.13, 5.11, 10.78]))  # session 59's false alarm
+    assert not took(row([0.15, 3.0, 0.28], [0.13, 0.5, 10.78]))  # joint 2 pinned
+    assert took(row([0.15, 0.6, 0.28], [0.13, 0.1, 10.78]))  # pinned, but within the width margin
+    assert took(row([0.15, 3.0, 0.28], [0.13, None, 10.78]))  # an interval not recorded (inf or not fitted)
+    assert not took(row([0.15, 0.52, 0.28], [0.13, 5.11, 10.78], significant=False))  # significance is only taken away
+    assert not took({"truth": truth, "json": {"rounds": [], "notes": []}})
+    assert took({**row([0.15, 3.0, 0.28], [0.13, 0.5, 10.78]), "truth": {k: v for k, v in truth.items() if k != "encoder_bits"}})  # no encoder known
+    none = "; the model stands"
+    for note, want in [
+        ("a pair with wrinkling (...) and one of payload_mass, backlash, each fitted with it from its seeds: no candidate significant" + none, False),
+        ("a pair with wrinkling (...) and one of payload_mass, backlash, each fitted with it from its seeds: payload_mass kept (BIC gain 30)", True),
+        ("a pair with backlash (...) and one of sensor_delay, torsion, each fitted jointly with it from its seeds: sensor_delay kept (BIC gain 306)", True),
+        ("a pair with wrinkling (...) and one of payload_mass, torsion, each fitted with it from its seeds: torsion kept (BIC gain 30)", False),
+        ("joint_friction back at its base law (tau_s neutral; candidates backlash, torsion, each fitted with joint_friction from its seeds): torsion kept", True),
+        ("backlash back at its base law (inertia neutral; candidates torsion, air_drag): air_drag not kept (BIC gain -1374.9)", False),
+        ("backlash back at its base law (inertia neutral; candidates torsion, air_drag, each fitted with backlash, payload_mass from its seeds): "
+         "torsion kept (BIC gain 61721.3)", False),
+        ("a pair with air_drag (...) and one of payload_mass, backlash, below the likelihood threshold alone, each fitted jointly with it from its "
+         "seeds: payload_mass kept", True),
+    ]:
+        assert took({"truth": truth, "json": {"rounds": [], "notes": [note]}}) is want, note
+
+
 def test_equivalence_compares_every_number_the_classification_reads(tmp_path, capsys):
     import equivalence
 
