@@ -657,6 +657,36 @@ def test_the_play_path_test_flags_every_result_an_unpinned_backlash_could_change
         assert took({"truth": truth, "json": {"rounds": [], "notes": [note]}}) is want, note
 
 
+def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_path, monkeypatch):
+    """benchmarks/rerun.py makes a stored result's run again from its family's seed and index
+    (the run folders are not kept), checks the truth it makes is the stored one, and writes
+    the new result where --pool and equivalence.py read it."""
+    import rerun
+
+    sp = F.family_specs("nominal", "popup", 3, 19)[2]
+    path, truth = F.make_run(sp, tmp_path / "first")
+    stored = tmp_path / "old" / "results" / f"{path.name}.json"
+    stored.parent.mkdir(parents=True)
+    stored.write_text(json.dumps({"truth": truth}))
+    again = rerun.remake(truth, tmp_path / "again")
+    assert again.name == path.name and F.read_truth(again) == F.read_truth(path)
+    assert (again / "measurements.csv").read_bytes() == (path / "measurements.csv").read_bytes()
+    with pytest.raises(ValueError, match="differs from the stored one"):
+        rerun.remake({**truth, "noise_scale": truth["noise_scale"] * 2}, tmp_path / "other")
+    seen = []
+
+    def fake_row(p, t, cache, *, timeout, extra):
+        seen.append((p.name, t == truth, cache, list(extra)))
+        cache.write_text("{}")
+        return {}
+
+    monkeypatch.setattr(rerun.bench, "diagnose_row", fake_row)
+    out = tmp_path / "new"
+    assert rerun.main([str(stored), "--out", str(out)]) == 0
+    assert seen == [(path.name, True, out / "results" / f"{path.name}.json", ["--threads", "1"])], seen
+    assert rerun.main([str(stored), "--out", str(out)]) == 0 and len(seen) == 1  # a result already there is kept
+
+
 def test_equivalence_compares_every_number_the_classification_reads(tmp_path, capsys):
     import equivalence
 
