@@ -610,14 +610,14 @@ def _play_unpinned_took(row: Dict[str, Any]) -> bool:
     and found something significant (its fits are not reported)."""
     js = row.get("json") or {}
     truth = row.get("truth") or {}
-    try:
-        w = F.encoder_resolution(int(truth["encoder_bits"]))
-    except (KeyError, TypeError, ValueError):
-        return True
     for rd in js.get("rounds") or []:
         for s in rd.get("suspects") or []:
             if not isinstance(s, dict) or s.get("effect") != "backlash" or not s.get("significant"):
                 continue
+            try:
+                w = F.encoder_resolution(int(truth["encoder_bits"]))
+            except (KeyError, TypeError, ValueError):
+                return True
             gap = (s.get("params") or {}).get("gap") or []
             ci = (s.get("ci95") or {}).get("gap") or []
             if not any(_f(g) >= 0.5 * w * _PLAY_WIDTH_MARGIN and _f(c) < _f(g) for g, c in zip(gap, ci)):
@@ -665,6 +665,20 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "disturbance, same notes, conclusion and significance (its old result came from an AVX2 "
                      "machine: 1e-12 apart from the nominal replay on)",
                      PathTest(_refit_credit_took, "its outcome fixed by round 1")),
+    "5be17461b6e3": ("66634c33accf",
+                     "570357f: candidate.unpinned_play: a backlash fit that passes every other test is significant "
+                     "only where some joint's gap is at least half a reading wide and clear of zero by its 95 % "
+                     "interval (estimate.uncertainty, now worked out once per fit and reused for the suspect)",
+                     "the rule only takes significance from a backlash fitted as the candidate; the variants and "
+                     "combinations tried stay as they were, and the preferred one changes only where a fit that "
+                     "was significant is refused, which the round's reported suspect or a pair or rival note "
+                     "shows (_play_unpinned_took). Reruns on 570357f and a952f13 (session 59, this machine): "
+                     "popup nominal seed 676 and MuJoCo nominal seed 677, 19 of 20 bit-identical (677-003 took the "
+                     "path: its false alarm is gone); the near backlash runs MuJoCo 673-000 and popup 672-000, "
+                     "significant backlash the rule keeps, bit-identical (fam_mne677_570357f, fam_pne676_570357f, "
+                     "fam_meq59_a952f13, fam_peq59_a952f13)",
+                     PathTest(_play_unpinned_took, "no significant backlash its interval leaves unpinned, no backlash "
+                              "candidate in a pair or rival step that kept something")),
 }
 
 
