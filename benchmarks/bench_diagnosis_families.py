@@ -317,6 +317,15 @@ def _frac(a: int, b: int) -> str:
     return f"{a}/{b}" if b else "-"
 
 
+def extra_effects(r: Dict[str, Any]) -> List[str]:
+    """The effects of the model a diagnosis ended with (its last history step) that the run
+    did not hide: what it blamed beside the truth (a precision count, no target)."""
+    hist = [h for h in ((r.get("json") or {}).get("history") or []) if isinstance(h, dict)]
+    final = [str(e) for e in (hist[-1].get("effects") or [])] if hist else []
+    hidden = set(r["outcome"].get("hidden") or r["truth"].get("hidden") or [])
+    return [e for e in final if e not in hidden]
+
+
 def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]:
     rs = [r for r in rows if r["truth"]["engine"] == engine]
     lines = [f"engine: {engine}  ({len(rs)} runs)", ""]
@@ -379,6 +388,16 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
             lines.append(f"{'':<64} {rate_verdict(ok, len(g))}")
         lo, hi = rate_bounds(ok, len(g))
         counts[kind] = {"ok": ok, "classified": len(done), "failed": len(g) - len(done), "rate_bounds": [lo, hi]}
+    spur = []
+    for kind in ("effect", "pair"):
+        done = [r for r in rs if r["outcome"]["kind"] == kind and r["outcome"]["ok"] is not None]
+        ex = [r for r in done if extra_effects(r)]
+        if done:
+            lo, hi = rate_bounds(len(done) - len(ex), len(done))
+            spur.append(f"{kind} runs {len(ex)}/{len(done)} (≤ {100 * (1 - lo):.1f} %)")
+            counts[f"{kind}_extra"] = {"runs": [Path(r["run"]).name for r in ex], "of": len(done)}
+    if spur:
+        lines.append("(f) an effect not hidden in the run kept in the final model: " + ", ".join(spur) + f" (one-sided {100 * RATE_CONFIDENCE:.0f} % upper bounds)")
     eff = [r for r in rs if r["outcome"]["kind"] == "effect" and r["outcome"]["ok"] is not None]
     by = {st: [r for r in eff if r["truth"].get("style", "lab") == st] for st in F.STYLES}
     if eff:

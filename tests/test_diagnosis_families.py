@@ -386,6 +386,25 @@ def test_benchmark_classifies_diagnosis_output():
     assert bench.classify(eff, {"rc": 0, "json": js, "failure": None})["ok"] is False
 
 
+def test_the_table_counts_effects_kept_beside_the_hidden_ones():
+    def row(name, kind, hidden, steps):
+        truth = {"kind": kind, "family": "pairs" if kind == "pair" else hidden[0], "hidden": hidden, "engine": "popup", "style": "lab"}
+        res = {"rc": 0, "json": _js(steps), "failure": None}
+        return {"run": name, "truth": truth, "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0}, "json": res["json"],
+                "outcome": bench.classify(truth, res)}
+    rows = [row("clean", "effect", ["payload_mass"], [([], 10.0), (["payload_mass"], 0.2)]),
+            # the extra effect dropped again by a later step is not kept
+            row("dropped", "effect", ["payload_mass"], [([], 10.0), (["payload_mass"], 1.0), (["payload_mass", "torsion"], 0.5), (["payload_mass"], 0.6)]),
+            row("extra", "effect", ["payload_mass"], [([], 10.0), (["payload_mass"], 1.0), (["payload_mass", "torsion"], 0.5)]),
+            row("pair", "pair", ["backlash", "sensor_delay"], [([], 10.0), (["backlash", "sensor_delay", "higher_bending_modes"], 0.5)])]
+    assert [bench.extra_effects(r) for r in rows] == [[], [], ["torsion"], ["higher_bending_modes"]]
+    text, summ = bench.table(rows, "popup")
+    assert summ["counts"]["effect_extra"] == {"runs": ["extra"], "of": 3}
+    assert summ["counts"]["pair_extra"] == {"runs": ["pair"], "of": 1}
+    lo = bench.rate_bounds(2, 3)[0]
+    assert f"effect runs 1/3 (≤ {100 * (1 - lo):.1f} %)" in text and "pair runs 1/1" in text
+
+
 def test_report_only_tables_the_cache_and_generates_nothing(tmp_path, capsys):
     eff = {"kind": "effect", "family": "payload_mass", "hidden": ["payload_mass"], "engine": "mujoco", "style": "lab"}
     js = _js([([], 10.0), (["payload_mass"], 0.2)], [("payload_mass", True)])
