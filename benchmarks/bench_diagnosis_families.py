@@ -393,7 +393,7 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
         done = [r for r in rs if r["outcome"]["kind"] == kind and r["outcome"]["ok"] is not None]
         ex = [r for r in done if extra_effects(r)]
         if done:
-            lo, hi = rate_bounds(len(done) - len(ex), len(done))
+            lo = rate_bounds(len(done) - len(ex), len(done))[0]
             spur.append(f"{kind} runs {len(ex)}/{len(done)} (≤ {100 * (1 - lo):.1f} %)")
             counts[f"{kind}_extra"] = {"runs": [Path(r["run"]).name for r in ex], "of": len(done)}
     if spur:
