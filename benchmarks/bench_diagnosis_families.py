@@ -627,6 +627,21 @@ def _play_unpinned_took(row: Dict[str, Any]) -> bool:
     (its ``ci95`` finite and below the gap, the gap at least :data:`_PLAY_WIDTH_MARGIN` ×
     half the bench's encoder step), or a pair or rival step fitted backlash as a candidate
     and found something significant (its fits are not reported)."""
+    return _play_took(row, lambda g, c, w: _f(g) >= 0.5 * w * _PLAY_WIDTH_MARGIN and _f(c) < _f(g))
+
+
+def _play_dither_took(row: Dict[str, Any]) -> bool:
+    """Whether the classification of ``row`` may depend on a backlash fit the one-reading
+    rule (``rules.PINNED_READINGS``, the change after version ``66634c33accf``) refuses: as
+    :func:`_play_unpinned_took`, with a significant backlash that no joint clears by one
+    reading (× :data:`_PLAY_WIDTH_MARGIN`) less its ``ci95``."""
+    return _play_took(row, lambda g, c, w: _f(g) - _f(c) >= w * _PLAY_WIDTH_MARGIN)
+
+
+def _play_took(row: Dict[str, Any], pinned: Callable[[Any, Any, float], bool]) -> bool:
+    """Whether a round of ``row`` reports a significant backlash none of whose joints is
+    ``pinned(gap, ci95, encoder step)``, or a pair or rival step fitted backlash as a
+    candidate and kept something (those fits are not reported)."""
     js = row.get("json") or {}
     truth = row.get("truth") or {}
     for rd in js.get("rounds") or []:
@@ -639,7 +654,7 @@ def _play_unpinned_took(row: Dict[str, Any]) -> bool:
                 return True
             gap = (s.get("params") or {}).get("gap") or []
             ci = (s.get("ci95") or {}).get("gap") or []
-            if not any(_f(g) >= 0.5 * w * _PLAY_WIDTH_MARGIN and _f(c) < _f(g) for g, c in zip(gap, ci)):
+            if not any(pinned(g, c, w) for g, c in zip(gap, ci)):
                 return True
     for n in (str(x) for x in js.get("notes") or []):
         if n.endswith(_NONE_IN_PAIR):

@@ -14,7 +14,7 @@ from .. import effects as fx
 from .. import estimate as est
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
-from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PLAY_PARAMS, PLAY_READINGS, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
+from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PINNED_READINGS, PLAY_PARAMS, PLAY_READINGS, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
                     STABILITY_MARGIN, STIFFEST, STRUCTURE, UNSEEN_ALTERNATIONS, VARIANTS)
 from .results import Suspect, fmt_list
 
@@ -101,9 +101,9 @@ def unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
 
 def unpinned_play(prob: ReplayProblem, name: str, flat: np.ndarray, half: Mapping[str, Sequence[float]]) -> str:
     """Why the play of effect ``name`` fitted to ``flat`` is not pinned down by the run ("" if
-    it is): on no joint is it both at least :data:`PLAY_READINGS` encoder readings wide and
-    clear of zero by its 95 % half-width ``half[key][j]`` (``inf``: not identifiable; ``nan``:
-    not fitted, that joint judged by its width alone). A play whose interval holds zero is
+    it is): on no joint does it clear :data:`PINNED_READINGS` encoder readings by its 95 %
+    half-width ``half[key][j]`` (``inf``: not identifiable; ``nan``: not fitted, that joint
+    judged by its width alone, :data:`PLAY_READINGS`). A play whose interval holds zero is
     no finding, however much the likelihood gains: on a MuJoCo nominal run (200 Hz
     trapezoids, 12-bit encoders, noise × 0.32) a backlash with gaps of 0.15/0.52/0.28
     readings ± 0.13/5.1/11 readings and a free link-side inertia scored 1 099 and was added
@@ -117,11 +117,13 @@ def unpinned_play(prob: ReplayProblem, name: str, flat: np.ndarray, half: Mappin
     h = np.asarray(half[key], dtype=float)
     if not np.any(w > 0) or h.shape != gap.shape:
         return ""
-    pinned = (gap >= PLAY_READINGS * w) & (np.isnan(h) | (h < gap))
+    with np.errstate(invalid="ignore"):
+        pinned = np.where(np.isnan(h), gap >= PLAY_READINGS * w, gap - h >= PINNED_READINGS * w)
     if pinned.any():
         return ""
     return (f"not significant: its {key} ({fmt_list(gap.tolist())} rad ± {fmt_list(h.tolist())}) is not pinned down by this run: on no joint "
-            f"is it both {PLAY_READINGS:g} encoder readings ({fmt_list(w.tolist())} rad each) wide and clear of zero by its 95 % interval")
+            f"does it clear {PINNED_READINGS:g} encoder reading{'s' if PINNED_READINGS != 1 else ''} ({fmt_list(w.tolist())} rad each) by its 95 % interval, "
+            f"what an encoder dithering between two readings can stand in for")
 
 
 def limit_passed(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:

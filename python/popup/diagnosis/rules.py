@@ -209,6 +209,16 @@ the error from 2.05 to 0.30 noise units, every channel to within 1.2 × its nois
 (benchmarks/README.md, session 23)."""
 
 
+PINNED_READINGS = 1.0
+"""Readings a fitted play must clear by its 95 % interval (gap − half-width, on at least one
+joint) to be a finding: one reading, what an encoder dithering between two readings can stand
+in for. A held play one reading wide keeps the replayed link still while the encoder steps
+forth and back, and on MuJoCo nominal 685-009 (500 Hz, 12-bit, noise × 1.57) joint 1's
+1.01 ± 0.03 readings were added (0.78 → 0.15 noise units; its record undoes a one-reading
+step 42 times). Each of the 40 significant backlash fits of archived runs with a hidden
+backlash clears at least 1.24 readings on some joint (benchmarks/README.md, session 60)."""
+
+
 #: Effects with a limit per motor joint [N·m] that the joint's measured torque channel
 #: (``tau1``...) cannot exceed: a fitted limit the measurement passes is not a finding.
 LIMIT_PARAMS = {"actuator_saturation": "tau_max"}
