@@ -713,6 +713,22 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "fam_meq59_a952f13, fam_peq59_a952f13)",
                      PathTest(_play_unpinned_took, "no significant backlash its interval leaves unpinned, no backlash "
                               "candidate in a pair or rival step that kept something")),
+    "66634c33accf": ("9e21507cd957",
+                     "e4bfbe1: rules.PINNED_READINGS; candidate.unpinned_play keeps a play only where some joint's "
+                     "gap less its 95 % half-width is at least one encoder reading (what an encoder dithering "
+                     "between two readings can stand in for; a joint not fitted is judged by its width, as before)",
+                     "the rule, like the one before it, only takes significance from a backlash fitted as the "
+                     "candidate, so a result took the path only where a round reports a significant backlash "
+                     "that no joint clears one reading by (with a margin of 1.25 on the bench's encoder step), or "
+                     "a pair or rival step fitted backlash and kept something (_play_dither_took). Reruns on "
+                     "85730d7 (sessions 60 and 61, this machine): popup nominal seed 684 and MuJoCo nominal seed "
+                     "685, 19 of 20 bit-identical (685-009 took the path: its false alarm is gone); MuJoCo 673 "
+                     "air_drag-000 ok, pressure_leak-000 ok and bit-identical; the other results that took the "
+                     "path, MuJoCo pairs 662-001, 007 and 009, rerun in session 61 (benchmarks/README.md) "
+                     "(fam_pnb684_85730d7, fam_mnb685_85730d7, fam_mdt60a_85730d7, "
+                     "fam_mdt60b_85730d7, fam_rr61_85730d7)",
+                     PathTest(_play_dither_took, "no significant backlash that no joint clears one reading by, no "
+                              "backlash candidate in a pair or rival step that kept something")),
 }
 
 
