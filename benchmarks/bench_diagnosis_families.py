@@ -724,7 +724,7 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "85730d7 (sessions 60 and 61, this machine): popup nominal seed 684 and MuJoCo nominal seed "
                      "685, 19 of 20 bit-identical (685-009 took the path: its false alarm is gone); MuJoCo 673 "
                      "air_drag-000 ok, pressure_leak-000 ok and bit-identical; the other results that took the "
-                     "path, MuJoCo pairs 662-001, 007 and 009, rerun in session 61 (benchmarks/README.md) "
+                     "path, MuJoCo pairs 662-001, 007 and 009, ok and bit-identical (session 61) "
                      "(fam_pnb684_85730d7, fam_mnb685_85730d7, fam_mdt60a_85730d7, "
                      "fam_mdt60b_85730d7, fam_rr61_85730d7)",
                      PathTest(_play_dither_took, "no significant backlash that no joint clears one reading by, no "
