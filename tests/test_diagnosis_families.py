@@ -639,19 +639,27 @@ def test_a_path_test_carries_forward_only_results_whose_outcome_round_one_fixed(
 
 
 
+def _backlash_row(gap, ci, significant=True, notes=(), before=()):
+    """A result of a MuJoCo nominal run (12-bit encoders) whose one round reports the suspects
+    ``before`` and a backlash with ``gap`` ± ``ci`` (both in encoder readings; ``None``: no
+    interval recorded)."""
+    w = F.encoder_resolution(12)
+    truth = {"kind": "nominal", "family": "nominal", "hidden": [], "engine": "mujoco", "encoder_bits": 12}
+    s = {"effect": "backlash", "significant": significant, "params": {"gap": [g * w for g in gap]},
+         "ci95": {"gap": [None if c is None else c * w for c in ci]}}
+    return {"truth": truth, "json": {"rounds": [{"suspects": [*before, s]}], "notes": list(notes)}}
+
+
 def test_the_play_path_test_flags_every_result_an_unpinned_backlash_could_change():
     """The PathTest of the play-interval rule (version 5be17461b6e3's successor): a result
     took the changed path where a round reports a significant backlash that no joint pins
     (gap at least half a reading, with the bench's margin, and its 95 % interval below the
     gap), or a pair or rival step fitted backlash as a candidate and kept something."""
     took = bench._play_unpinned_took
-    w = F.encoder_resolution(12)
-    truth = {"kind": "nominal", "family": "nominal", "hidden": [], "engine": "mujoco", "encoder_bits": 12}
+    truth = _backlash_row([], [])["truth"]
 
     def row(gap, ci, significant=True, notes=()):
-        s = {"effect": "backlash", "significant": significant, "params": {"gap": [g * w for g in gap]},
-             "ci95": {"gap": [None if c is None else c * w for c in ci]}}
-        return {"truth": truth, "json": {"rounds": [{"suspects": [{"effect": "payload_mass", "significant": True}, s]}], "notes": list(notes)}}
+        return _backlash_row(gap, ci, significant, notes, before=[{"effect": "payload_mass", "significant": True}])
 
     assert took(row([0.15, 0.52, 0.28], [0.13, 5.11, 10.78]))  # session 59's false alarm
     assert not took(row([0.15, 3.0, 0.28], [0.13, 0.5, 10.78]))  # joint 2 pinned
@@ -681,13 +689,8 @@ def test_the_dither_path_test_flags_every_result_a_one_reading_play_could_change
     reports a significant backlash that no joint clears by one reading (with the bench's
     margin) less its 95 % interval, or a pair or rival step fitted backlash."""
     took = bench._play_dither_took
-    w = F.encoder_resolution(12)
-    truth = {"kind": "nominal", "family": "nominal", "hidden": [], "engine": "mujoco", "encoder_bits": 12}
-
-    def row(gap, ci, significant=True, notes=()):
-        s = {"effect": "backlash", "significant": significant, "params": {"gap": [g * w for g in gap]},
-             "ci95": {"gap": [None if c is None else c * w for c in ci]}}
-        return {"truth": truth, "json": {"rounds": [{"suspects": [s]}], "notes": list(notes)}}
+    truth = _backlash_row([], [])["truth"]
+    row = _backlash_row
 
     assert took(row([1.01, 0.06, 0.20], [0.03, 0.13, 0.22]))  # MuJoCo nominal 685-009
     assert not bench._play_unpinned_took(row([1.01, 0.06, 0.20], [0.03, 0.13, 0.22]))  # the rule before let it in
