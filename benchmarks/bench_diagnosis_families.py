@@ -666,6 +666,27 @@ def _play_took(row: Dict[str, Any], pinned: Callable[[Any, Any, float], bool]) -
     return False
 
 
+def _first_pair_took(row: Dict[str, Any]) -> bool:
+    """Whether ``row`` may have reached the first-round pair step (``loop._first_round_pair``,
+    the step added after version ``9e21507cd957``): it is tried once, where one effect is in
+    the model, a round beside it finds nothing significant and the model is not at its floor,
+    over the candidates significant in round 1 other than that effect, two at a time. A
+    result reached it, read conservatively, where its history has a step with one effect,
+    some round after the first has no significant candidate, and round 1 had at least two
+    significant candidates other than that one effect. Elsewhere the step is never called,
+    and the loop runs as it did."""
+    js = row.get("json") or {}
+    rounds = [rd for rd in js.get("rounds") or [] if isinstance(rd, dict)]
+    hist = [h for h in js.get("history") or [] if isinstance(h, dict)]
+    ones = {str(h["effects"][0]) for h in hist if len(h.get("effects") or []) == 1}
+    if not rounds or not ones:
+        return False
+    if all(any(isinstance(s, dict) and s.get("significant") for s in rd.get("suspects") or []) for rd in rounds[1:]):
+        return False
+    sig1 = {str(s.get("effect")) for s in rounds[0].get("suspects") or [] if isinstance(s, dict) and s.get("significant")}
+    return any(len(sig1 - {e}) >= 2 for e in ones)
+
+
 def _took(marker: Union[str, PathTest], row: Dict[str, Any]) -> bool:
     if isinstance(marker, PathTest):
         return marker.took(row)

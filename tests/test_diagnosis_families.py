@@ -702,6 +702,29 @@ def test_the_dither_path_test_flags_every_result_a_one_reading_play_could_change
     assert took({"truth": truth, "json": {"rounds": [], "notes": [note]}})
 
 
+def test_the_first_pair_path_test_flags_every_result_that_reached_the_first_round_pair_step():
+    """The PathTest of the first-round pair step (version 9e21507cd957's successor): the step
+    runs where one effect is in the model, a later round finds nothing significant, and
+    round 1 had two other significant candidates to pair."""
+    took = bench._first_pair_took
+
+    def sus(*sig, quiet=()):
+        return {"suspects": [{"effect": e, "significant": True} for e in sig] + [{"effect": e, "significant": False} for e in quiet]}
+
+    def row(rounds, hist):
+        return {"json": {"rounds": rounds, "history": [{"effects": h} for h in hist]}}
+
+    r1 = sus("backlash", "wrinkling", "payload_mass", "air_drag")
+    assert took(row([r1, sus(quiet=["pressure_leak"])], [[], ["backlash"]]))  # MuJoCo pair 662-013
+    assert not took(row([r1], [[], ["backlash"]]))  # at its floor after round 1: no later round
+    assert not took(row([r1, sus("payload_mass")], [[], ["backlash"], ["backlash", "payload_mass"]]))  # round 2 added one
+    assert not took(row([sus("backlash", "wrinkling"), sus(quiet=["wrinkling"])], [[], ["backlash"]]))  # one other only
+    assert took(row([sus("backlash", "wrinkling", "torsion"), sus(quiet=["wrinkling"])], [[], ["backlash"]]))
+    assert not took(row([sus(quiet=["backlash"]), sus(quiet=["wrinkling"])], [[]]))  # nothing added: the pair-from-none step
+    # a one-effect model reached by a swap counts too
+    assert took(row([r1, sus("payload_mass"), sus(quiet=["torsion"])], [[], ["backlash"], ["backlash", "wrinkling"], ["wrinkling"]]))
+
+
 def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_path, monkeypatch):
     """benchmarks/rerun.py makes a stored result's run again from its family's seed and index
     (the run folders are not kept), checks the truth it makes is the stored one, and writes
@@ -993,6 +1016,38 @@ def test_a_richer_law_standing_in_for_the_partner_is_reset_in_round_two(tmp_path
     assert got["payload_mass"]["delta_kg"][0] == pytest.approx(truth["effects"]["payload_mass"]["delta_kg"], rel=0.05), got
     assert got["torsion"]["k_t"][0] == pytest.approx(truth["effects"]["torsion"]["k_t"][0], rel=0.05), got
     assert "stood in for torsion" in h.conclusion, h.conclusion
+
+
+# about 10 minutes of one core: with -m slow (benchmarks/slow_tests.sh)
+@pytest.mark.slow
+def test_an_effect_standing_in_for_two_of_round_ones_candidates_is_swapped_for_them(tmp_path):
+    """MuJoCo pair 662-013: an air drag of cd 5.48 beside a +0.199 kg payload (1 kHz
+    multisine, no torque channels). Alone, the drag goes to cd ≈ 95 and the payload to
+    −0.16 kg; round 1 adds a backlash with compliant flanks (the largest likelihood gain,
+    though wrinkling leaves less error), and nothing is significant beside it. The pair step
+    of version 9e21507cd957 only paired candidates that passed the likelihood threshold
+    beside the backlash; the run ended at its time limit with wrinkling and drag. The
+    first-round pair step fits round 1's other significant candidates two at a time from
+    their fits: drag and payload land on the truth together, and replace the backlash in
+    round 2, at the floor."""
+    from popup.diagnosis.rules import AT_FLOOR
+
+    sp = F.family_specs("pairs", "mujoco", 14, 662)[13]
+    path, truth = F.make_run(sp, tmp_path)
+    assert sorted(truth["hidden"]) == ["air_drag", "payload_mass"]
+    run = _read(path)
+    h = popup.improve(run.model(), run, effects=["backlash", "wrinkling", "payload_mass", "air_drag"], max_rounds=2, threads=1)
+    d1 = h.diagnoses[0]
+    alone = {s.effect: s for s in d1.suspects}
+    assert d1.best is not None and d1.best.effect == "backlash", [(s.effect, s.score) for s in d1.suspects]
+    assert alone["payload_mass"].params["delta_kg"][0] < 0 < truth["effects"]["payload_mass"]["delta_kg"], alone["payload_mass"].params
+    last2 = [st for st in h.steps if st.round <= 2][-1]
+    assert sorted(last2.effects) == ["air_drag", "payload_mass"] and last2.removed == "backlash", [(x.round, x.effects, x.removed) for x in h.steps]
+    assert last2.error <= 2 * AT_FLOOR, last2.error
+    got = last2.params
+    assert got["payload_mass"]["delta_kg"][0] == pytest.approx(truth["effects"]["payload_mass"]["delta_kg"], rel=0.05), got
+    assert got["air_drag"]["cd"][0] == pytest.approx(truth["effects"]["air_drag"]["cd"], rel=0.05), got
+    assert any(n.startswith("pairs of round 1's candidates for backlash") and "swapped for it" in n for n in h.notes), h.notes
 
 
 # ---------------------------------------------------------------------------- the encoder floor

@@ -135,6 +135,13 @@ effect must, is added in round 1. Where none does, each such candidate is tried 
 tested below the threshold, fitted jointly from their seeds (a partner can replay worse
 alone than the nominal, its fit in another basin: a soft torsion beside a missing payload),
 and of the pairs that qualify the one of the largest BIC gain over the nominal is added.
+*First-round pair*: when one effect was added and nothing is significant beside it, above
+the floor, it may stand in for two of round 1's other candidates that each fit so badly
+alone that neither passes the likelihood threshold beside it (drag and a payload, each in
+another basin alone); before the base-law and pair steps, the :data:`FIRST_PAIRS` best
+candidates significant in round 1 are fitted two at a time jointly from their round-1
+fits, and the pair of the largest BIC gain, confirmed as the pair step confirms one,
+replaces the effect where it beats it and explains :data:`MIN_EXPLAINED` of its error.
 The swap and the base law offer only
 candidates some round found significant (an effect another stood in for explained much of
 the same error when that one was chosen), each (effect, candidate) pair once; what they
@@ -168,6 +175,7 @@ from .rank import diagnose, model_error
 from .results import Diagnosis, History, HistoryStep, Suspect
 from .rules import (
     AT_FLOOR,
+    FIRST_PAIRS,
     FLOOR_MULTIPLE,
     JOINT_TOP,
     MIN_EXPLAINED,
@@ -208,6 +216,7 @@ __all__ = [
     "NOISE_RECHECK",
     "OFFSET_SHARE",
     "PAIR_HINTS",
+    "FIRST_PAIRS",
     "OFFSET_Z",
     "SPIKE_SHARE",
     "PLAY_READINGS",

@@ -3,6 +3,7 @@ backward, swap and base-law steps; the floors re-estimated after each step."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
@@ -16,7 +17,7 @@ from ..io import MeasuredRun
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
 from ..results import UNITS
-from .rules import (AT_FLOOR, ENCODER_NOTE, JOINT_TOP, MIN_EXPLAINED, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, PAIR_HINTS, Progress, SCORE_THRESHOLD,
+from .rules import (AT_FLOOR, ENCODER_NOTE, FIRST_PAIRS, JOINT_TOP, MIN_EXPLAINED, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, PAIR_HINTS, Progress, SCORE_THRESHOLD,
                     STEP_HALVINGS, model_at_floor)
 from .results import Diagnosis, History, HistoryStep, Suspect, final_problem, step_at_floor
 from .candidate import left_out, limit_passed, unresolved_play
@@ -139,6 +140,7 @@ def _improve(
     fitted_params: Dict[str, List[str]] = {}
     swap_tried: Dict[str, Set[str]] = {}
     pair_tried: Set[Tuple[str, str]] = set()  # (the effect swapped out, the hint) of each pair step
+    first_pairs = False  # the first-round pair step is tried once
     notes: List[str] = []  # what the swap and base-law steps tried and why, the floors re-estimated
     current, cprob = model, prob
     error = ""
@@ -185,9 +187,16 @@ def _improve(
                 # nothing significant is left, but the model is not at its floor: a richer
                 # law chosen for an earlier effect may be standing in for a missing effect
                 # (a payload's centre-of-mass offset for a torsion); each is tried back at
-                # its base law with the best candidate added
+                # its base law with the best candidate added. First, one effect added may
+                # stand in for two of round 1's other candidates that each fit badly alone
+                pr = None
+                if len(added) == 1 and not first_pairs and not step_at_floor(steps[-1], prob):
+                    first_pairs = True
+                    stage, stage_round = f"swap {added[0]} for a pair of round 1's candidates: ", rnd + 1
+                    pr = _first_round_pair(prob, run, cprob, added[0], fitted_params, diags[0], effects, threads, max_iter, prog, notes)
+                    stage = ""
                 lw = None
-                if added and not step_at_floor(steps[-1], prob):
+                if pr is None and added and not step_at_floor(steps[-1], prob):
                     for e in list(added):
                         # first the candidates significant in some round (screened from their
                         # fits); then the rest of the library, each fitted from its seeds: an
@@ -202,8 +211,7 @@ def _improve(
                         if lw is not None:
                             reset = e
                             break
-                pr = None
-                if lw is None and len(added) == 1 and not step_at_floor(steps[-1], prob):
+                if pr is None and lw is None and len(added) == 1 and not step_at_floor(steps[-1], prob):
                     # one effect added and a systematic error left: it may stand in for two
                     # effects neither of which explains much alone (drag beside a payload:
                     # a backlash with link-side inertia and contact damping mimics both)
@@ -212,7 +220,7 @@ def _improve(
                     stage, stage_round = f"swap {added[0]} for a pair: ", rnd + 1
                     pr = _try_pair(prob, run, cprob, added[0], fitted_params, hints, diags, effects, threads, max_iter, prog, notes)
                     stage = ""
-                if lw is None and not added and not step_at_floor(steps[-1], prob):
+                if pr is None and lw is None and not added and not step_at_floor(steps[-1], prob):
                     # nothing added and a systematic error left: two effects may each replay
                     # worse alone than neither (a sensor delay beside a bending law that
                     # moves the phase of the channels it shares: MuJoCo pair, session 34)
@@ -445,7 +453,8 @@ def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept
                 diags: Sequence[Diagnosis], threads: int, max_iter: int,
                 progress: Optional[Progress], cur: ReplayProblem,
                 fitted_cur: Mapping[str, Sequence[str]], log: Optional[List[str]] = None, what: str = "",
-                joint: bool = False, screen: int = 1) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+                joint: bool = False, screen: int = 1,
+                starts: Optional[Mapping[str, Mapping[str, Sequence[float]]]] = None) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
     """The model of ``base`` with the best significant candidate among ``pool`` added (the
     candidates diagnosed with the effects ``kept``, fitted names ``fitted``, refitted with
     each; the best added and everything refitted jointly), if it beats the current model
@@ -455,12 +464,13 @@ def _best_added(prob: ReplayProblem, run: MeasuredRun, base: ReplayProblem, kept
     saying what (``what``) was tried and why it was (not) kept is appended. ``joint``: as
     :func:`diagnose`'s (every candidate fitted jointly with ``kept`` from its seeds).
     ``screen``: the number of best-screened candidates that get the full fit
-    (:func:`diagnose`'s)."""
+    (:func:`diagnose`'s). ``starts``: one more start per candidate (:func:`diagnose`'s),
+    instead of each one's fit in ``diags``."""
     what = what or "candidates " + ", ".join(pool)
     try:
         # only the best candidate is taken: the cheap screen picks the ``screen`` that get the full fit
         d = diagnose(base.model, run, effects=pool, threads=threads, max_iter=max_iter, problem=base, progress=progress, refit=fitted,
-                     starts=_prior_fits(diags), screen=screen, joint=joint)
+                     starts=_prior_fits(diags) if starts is None else starts, screen=screen, joint=joint)
         s = d.best
         if s is None:
             _note(log, f"{what}: no candidate significant; the model stands")
@@ -532,6 +542,80 @@ def _try_pair(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effec
         if out is not None:
             return out
     return None
+
+
+def _first_round_pair(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, effect: str, fitted: Dict[str, List[str]], d1: Diagnosis,
+                      effects: Optional[Sequence[str]], threads: int, max_iter: int, progress: Optional[Progress],
+                      log: Optional[List[str]] = None) -> Optional[Tuple[str, "Model", ReplayProblem, Dict[str, Dict[str, List[float]]], Dict[str, List[str]], Diagnosis]]:
+    """Whether the one added ``effect`` (model of ``cprob``) stands in for two of the other
+    candidates significant in round 1 (``d1``, on the nominal model of ``prob``), each of
+    which fits badly alone (a payload fitted alone beside the drag it hides lands in another
+    basin, and the drag at 17 × its truth). The :data:`FIRST_PAIRS` best of them are fitted
+    two at a time, jointly, from their round-1 fits (one start each, no seeds: a screen);
+    the pair of the largest BIC gain over the current model (:func:`_bic_gain`), if that
+    passes the threshold, is confirmed as the pair step confirms one: the nominal model with
+    the member of the larger round-1 score at its joint fit, the other diagnosed beside it,
+    fitted jointly with it from its seeds and its joint fit, both refitted (:func:`_best_added`).
+    The pair replaces ``effect`` where it beats the current model (:func:`_beats`) and
+    explains at least :data:`MIN_EXPLAINED` of its systematic error, the share one effect
+    must explain to be added. Returns what :func:`_best_added` returns (fitted names in the
+    order: the first member, the other), or ``None``; ``log`` gets one line per call, all
+    starting "pairs of round 1's candidates"."""
+    head = f"pairs of round 1's candidates for {effect}"
+    others = sorted((s for s in d1.suspects if s.significant and s.effect != effect and s.fitted and (effects is None or s.effect in effects)),
+                    key=lambda s: -s.score)[:FIRST_PAIRS]
+    if len(others) < 2:
+        _note(log, f"{head}: fewer than two others were significant; the model stands")
+        return None
+    fitted_cur = {effect: fitted[effect]}
+    e_cur = cprob.error()[0]
+    best: Optional[Tuple[float, Suspect, Suspect, ReplayProblem]] = None
+    failed: List[str] = []
+    pairs = list(itertools.combinations(others, 2))
+    for a, b in pairs:
+        nf = {a.effect: list(a.fitted), b.effect: list(b.fitted)}
+        try:
+            m = prob.model.with_effect(a.effect, **a.params).with_effect(b.effect, **b.params)
+            dt = min([x.dt for x in (a, b) if math.isfinite(x.dt)] + [m.dt])
+            _, p2, _ = _refit_stable(prob.with_model(m.with_dt(dt) if dt < m.dt else m), [a.effect, b.effect], nf, max_iter)
+            p2 = fit_unseen_motion(p2)
+            g = _bic_gain(p2, nf, cprob, fitted_cur)
+        except KeyboardInterrupt:
+            raise
+        except Exception as ex:  # noqa: BLE001 - that pair is not a rival; the others are
+            failed.append(f"{a.effect} + {b.effect} ({type(ex).__name__}: {ex})")
+            continue
+        if math.isfinite(g) and (best is None or g > best[0]):
+            best = (g, a, b, p2)
+    fails = f"; failed: {', '.join(failed)}" if failed else ""
+    names = f"{', '.join(s.effect for s in others)}; {len(pairs)} joint fits"
+    if best is None or not best[0] > SCORE_THRESHOLD:
+        top = f"the best, {best[1].effect} + {best[2].effect}, gains {best[0]:.1f} in BIC over it" if best is not None else "none could be fitted"
+        _note(log, f"{head} ({names}), each two fitted jointly from their fits: {top} (threshold {SCORE_THRESHOLD:g}){fails}; the model stands")
+        return None
+    g, a, b, p2 = best
+    what = (f"{head} ({names}), each two fitted jointly from their fits: {a.effect} + {b.effect} gains {g:.1f} in BIC over it{fails}; "
+            f"{b.effect} fitted with {a.effect} from its seeds and that fit")
+    pb = p2.model.effects
+    try:
+        base = fit_unseen_motion(prob.with_model(prob.model.with_effect(a.effect, **pb[a.effect]).with_dt(p2.model.dt)))
+    except KeyboardInterrupt:
+        raise
+    except Exception as ex:  # noqa: BLE001 - the model stands
+        _note(log, f"{what}: failed setting up {a.effect} ({type(ex).__name__}: {ex}); the model stands")
+        return None
+    start = {b.effect: {k: list(pb[b.effect][k]) for k in b.fitted if k in pb[b.effect]}}
+    out = _best_added(prob, run, base, [a.effect], {a.effect: list(a.fitted)}, [b.effect], [], threads, max_iter, progress, cprob, fitted_cur,
+                      log=log, what=what, joint=True, starts=start)
+    if out is None:
+        return None
+    e2 = out[2].error()[0]
+    share = 1 - e2 ** 2 / e_cur ** 2 if e_cur > 0 else 0.0
+    if share < MIN_EXPLAINED:
+        _note(log, f"{what}: the pair explains {share:.0%} of the systematic error ({e_cur:.3g} → {e2:.3g}), less than {MIN_EXPLAINED:.0%}; the model stands")
+        return None
+    _note(log, f"{what}: the pair explains {share:.0%} of the systematic error ({e_cur:.3g} → {e2:.3g}); {effect} swapped for it")
+    return out
 
 
 def _pair_from_none(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem, hints: Sequence[Suspect], d: Diagnosis,
