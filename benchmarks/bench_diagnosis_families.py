@@ -750,6 +750,18 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "fam_mdt60b_85730d7, fam_rr61_85730d7)",
                      PathTest(_play_dither_took, "no significant backlash that no joint clears one reading by, no "
                               "backlash candidate in a pair or rival step that kept something")),
+    "9e21507cd957": ("032f6f95c69f",
+                     "b8c0041: loop._first_round_pair (rules.FIRST_PAIRS): where one effect is in the model, a round "
+                     "beside it finds nothing significant and the model is above its floor, round 1's other "
+                     "significant candidates are fitted two at a time jointly from their fits, once per run, before "
+                     "the base-law and pair steps; the best pair replaces the effect where it beats it",
+                     "the step is new and only called there; everywhere else the loop runs the code it ran, so a "
+                     "result took the path only where its history has a one-effect model, a later round with nothing "
+                     "significant and round 1 at least two other significant candidates (_first_pair_took, read "
+                     "conservatively). Reruns on b8c0041 (session 62, this machine) of the results it flags: see "
+                     "benchmarks/README.md, session 62 (fam_rr62_b8c0041)",
+                     PathTest(_first_pair_took, "no one-effect model with nothing significant beside it and two other "
+                              "significant candidates in round 1")),
 }
 
 
