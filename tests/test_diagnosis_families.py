@@ -923,6 +923,14 @@ def test_every_candidate_is_refitted_on_the_replay_without_unseen_motion(tmp_pat
     assert best.error_after < 0.5 * d.nominal_error, (best.error_after, d.nominal_error)
 
 
+def _pair_run(tmp_path, engine, seed, index, hidden):
+    """Run ``index`` of the pair family ``engine``/``seed`` made again, its hidden effects
+    checked to be ``hidden`` (sorted); returns the run read back and its truth."""
+    path, truth = F.make_run(F.family_specs("pairs", engine, index + 1, seed)[index], tmp_path)
+    assert sorted(truth["hidden"]) == hidden
+    return _read(path), truth
+
+
 # about 10 minutes of one core: with -m slow (benchmarks/slow_tests.sh)
 @pytest.mark.slow
 def test_a_pair_neither_of_which_is_significant_alone_is_added_together(tmp_path):
@@ -935,10 +943,7 @@ def test_a_pair_neither_of_which_is_significant_alone_is_added_together(tmp_path
     floor and the delays come out at the truth's."""
     from popup.diagnosis.rules import AT_FLOOR, MIN_EXPLAINED
 
-    sp = F.family_specs("pairs", "mujoco", 1, 533)[0]
-    path, truth = F.make_run(sp, tmp_path)
-    assert sorted(truth["hidden"]) == ["higher_bending_modes", "sensor_delay"]
-    run = _read(path)
+    run, truth = _pair_run(tmp_path, "mujoco", 533, 0, ["higher_bending_modes", "sensor_delay"])
     h = popup.improve(run.model(), run, effects=["sensor_delay", "higher_bending_modes"], max_rounds=2, threads=1)
     d1 = h.diagnoses[0]
     assert d1.best is None  # neither alone: the pair step is what finds them
@@ -968,10 +973,7 @@ def test_a_pair_whose_partner_replays_worse_alone_than_the_nominal_is_found(tmp_
     link-1 stiffness."""
     from popup.diagnosis.rules import AT_FLOOR, SCORE_THRESHOLD
 
-    sp = F.family_specs("pairs", "popup", 1, 631)[0]
-    path, truth = F.make_run(sp, tmp_path)
-    assert sorted(truth["hidden"]) == ["payload_mass", "torsion"]
-    run = _read(path)
+    run, truth = _pair_run(tmp_path, "popup", 631, 0, ["payload_mass", "torsion"])
     h = popup.improve(run.model(), run, effects=["payload_mass", "torsion", "higher_bending_modes", "wrinkling"], max_rounds=2, threads=1)
     d1 = h.diagnoses[0]
     assert d1.best is None
@@ -1001,10 +1003,7 @@ def test_a_richer_law_standing_in_for_the_partner_is_reset_in_round_two(tmp_path
     floor, with the truth's values."""
     from popup.diagnosis.rules import AT_FLOOR
 
-    sp = F.family_specs("pairs", "mujoco", 11, 661)[10]
-    path, truth = F.make_run(sp, tmp_path)
-    assert sorted(truth["hidden"]) == ["payload_mass", "torsion"]
-    run = _read(path)
+    run, truth = _pair_run(tmp_path, "mujoco", 661, 10, ["payload_mass", "torsion"])
     h = popup.improve(run.model(), run, effects=["payload_mass", "torsion", "pressure_leak", "air_drag", "wrinkling"], max_rounds=2, threads=1)
     r1 = [st for st in h.steps if st.round == 1][-1]
     assert r1.effects == ["payload_mass"] and any(v != 0 for v in r1.params["payload_mass"]["com_offset_m"]), r1.params
@@ -1032,10 +1031,7 @@ def test_an_effect_standing_in_for_two_of_round_ones_candidates_is_swapped_for_t
     round 2, at the floor."""
     from popup.diagnosis.rules import AT_FLOOR
 
-    sp = F.family_specs("pairs", "mujoco", 14, 662)[13]
-    path, truth = F.make_run(sp, tmp_path)
-    assert sorted(truth["hidden"]) == ["air_drag", "payload_mass"]
-    run = _read(path)
+    run, truth = _pair_run(tmp_path, "mujoco", 662, 13, ["air_drag", "payload_mass"])
     h = popup.improve(run.model(), run, effects=["backlash", "wrinkling", "payload_mass", "air_drag"], max_rounds=2, threads=1)
     d1 = h.diagnoses[0]
     alone = {s.effect: s for s in d1.suspects}
