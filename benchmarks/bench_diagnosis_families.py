@@ -674,8 +674,12 @@ def _first_pair_took(row: Dict[str, Any]) -> bool:
     result reached it, read conservatively, where its history has a step with one effect,
     some round after the first has no significant candidate, and round 1 had at least two
     significant candidates other than that one effect. Elsewhere the step is never called,
-    and the loop runs as it did."""
+    and the loop runs as it did. A result diagnosed again with constant offsets fitted
+    (``improve(offsets=None)``'s second pass) took it too: its first pass, whose model
+    decided that, is not in the result."""
     js = row.get("json") or {}
+    if any("diagnosed again with a constant offset fitted per channel" in str(n) for n in js.get("notes") or []):
+        return True
     rounds = [rd for rd in js.get("rounds") or [] if isinstance(rd, dict)]
     hist = [h for h in js.get("history") or [] if isinstance(h, dict)]
     ones = {str(h["effects"][0]) for h in hist if len(h.get("effects") or []) == 1}

@@ -723,6 +723,11 @@ def test_the_first_pair_path_test_flags_every_result_that_reached_the_first_roun
     assert not took(row([sus(quiet=["backlash"]), sus(quiet=["wrinkling"])], [[]]))  # nothing added: the pair-from-none step
     # a one-effect model reached by a swap counts too
     assert took(row([r1, sus("payload_mass"), sus(quiet=["torsion"])], [[], ["backlash"], ["backlash", "wrinkling"], ["wrinkling"]]))
+    # the second pass with offsets fitted: its first pass is not in the result
+    again = row([r1], [[], ["backlash"]])
+    again["json"]["notes"] = ["the pass with constant offsets in the error added x and left 3 noise units, mostly constant offsets (…): "
+                              "diagnosed again with a constant offset fitted per channel (offsets=True, --offsets)"]
+    assert took(again)
 
 
 def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_path, monkeypatch):
