@@ -762,8 +762,9 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "the step is new and only called there; everywhere else the loop runs the code it ran, so a "
                      "result took the path only where its history has a one-effect model, a later round with nothing "
                      "significant and round 1 at least two other significant candidates (_first_pair_took, read "
-                     "conservatively). Reruns on b8c0041 (session 62, this machine) of the results it flags: see "
-                     "benchmarks/README.md, session 62 (fam_rr62_b8c0041)",
+                     "conservatively). Reruns on b8c0041 (session 62, this machine) of 5 of the 10 results it flags: "
+                     "MuJoCo pair 662-013, the miss, now right; 662-000, popup pair 663-013, MuJoCo 688 backlash-000 "
+                     "and wrinkling-000 right and bit-identical (fam_rr62_b8c0041; benchmarks/README.md, session 62)",
                      PathTest(_first_pair_took, "no one-effect model with nothing significant beside it and two other "
                               "significant candidates in round 1")),
 }
