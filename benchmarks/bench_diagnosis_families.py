@@ -764,7 +764,9 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "significant and round 1 at least two other significant candidates (_first_pair_took, read "
                      "conservatively). Reruns on b8c0041 (session 62, this machine) of 5 of the 10 results it flags: "
                      "MuJoCo pair 662-013, the miss, now right; 662-000, popup pair 663-013, MuJoCo 688 backlash-000 "
-                     "and wrinkling-000 right and bit-identical (fam_rr62_b8c0041; benchmarks/README.md, session 62)",
+                     "and wrinkling-000 right and bit-identical (fam_rr62_b8c0041; benchmarks/README.md, session 62); "
+                     "the other 5 on 3777aa5 (session 63, another machine): MuJoCo 656 wrinkling-000, 656 and 657 "
+                     "backlash-001, pairs 662-001 and 008, all right with the same rounds (fam_rr63a/b/c_3777aa5)",
                      PathTest(_first_pair_took, "no one-effect model with nothing significant beside it and two other "
                               "significant candidates in round 1")),
 }
