@@ -192,6 +192,17 @@ def classify(truth: Dict[str, Any], res: Dict[str, Any]) -> Dict[str, Any]:
         two = set(str(e) for e in (last2.get("effects", []) or []))
         out["both_in_two"] = set(hidden) <= two
         out["ok"] = out["both_in_two"]
+        ms = {str(e): _f(v) for e, v in (truth.get("member_sigma") or {}).items()}
+        faint = [e for e in hidden if math.isfinite(ms.get(e, math.nan)) and ms[e] < DETECTABLE_SIGMA]
+        if faint:
+            # an effect the other all but hides (beside it, it moves no channel group by
+            # DETECTABLE_SIGMA): no method can find it, as an effect run's below 1 σ; counted
+            # apart, right when the others are found within two rounds and nothing that was
+            # not hidden is in the final model
+            final = set(str(e) for e in ((hist[-1].get("effects") or []) if hist else []))
+            out["kind"] = "pair_faint"
+            out["faint"] = faint
+            out["ok"] = bool(set(hidden) - set(faint) <= two and final <= set(hidden))
     elif kind == "disturbance":
         out["nothing_added"] = len(hist) <= 1
         out["says_outside"] = bool(NOT_EXPLAINED.search(concl))
@@ -273,10 +284,13 @@ CRITERION = {
     "pair": "(c) both effects added within two rounds",
     "disturbance": "(d) nothing added AND conclusion: not explained by the library",
     "undetectable": "(e) effect below 1 noise sigma in every channel: nothing else blamed",
+    "pair_faint": "(e) pair, one effect below 1 sigma beside the other: the other found within two rounds, nothing else blamed",
 }
 
 #: A hidden effect that moves no channel group by this many noise sigmas (RMS, the truth's
-#: ``effect_sigma``) is below detectability: counted under (e), not (a).
+#: ``effect_sigma``) is below detectability: counted under (e), not (a). Likewise an effect of
+#: a pair that moves no channel group by this much beside the other (the truth's
+#: ``member_sigma``, ``families.member_size``): the pair is counted under (e), not (c).
 DETECTABLE_SIGMA = 1.0
 
 
@@ -350,7 +364,7 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
                         "above": [sum(1 for r in lv["above"] if r["outcome"]["ok"]), len(lv["above"])]}
     lines.append("")
     counts: Dict[str, Any] = {}
-    for kind in ("effect", "nominal", "pair", "disturbance", "undetectable"):
+    for kind in ("effect", "nominal", "pair", "disturbance", "undetectable", "pair_faint"):
         g = [r for r in rs if r["outcome"]["kind"] == kind]
         if not g:
             continue
@@ -383,14 +397,14 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
             so = sum(1 for r in done if r["outcome"].get("says_outside"))
             extra = f"   [nothing added {na}/{len(done)}, says outside the library {so}/{len(done)}]"
         lines.append(f"{CRITERION[kind]:<64} {ok}/{len(done)} ({len(g) - len(done)} failed){extra}")
-        if kind != "undetectable":
+        if kind not in ("undetectable", "pair_faint"):
             # a failed diagnosis counts as a miss
             lines.append(f"{'':<64} {rate_verdict(ok, len(g))}")
         lo, hi = rate_bounds(ok, len(g))
         counts[kind] = {"ok": ok, "classified": len(done), "failed": len(g) - len(done), "rate_bounds": [lo, hi]}
     spur = []
-    for kind in ("effect", "pair"):
-        done = [r for r in rs if r["outcome"]["kind"] == kind and r["outcome"]["ok"] is not None]
+    for kind, kinds in (("effect", ("effect",)), ("pair", ("pair", "pair_faint"))):
+        done = [r for r in rs if r["outcome"]["kind"] in kinds and r["outcome"]["ok"] is not None]
         ex = [r for r in done if extra_effects(r)]
         if done:
             lo = rate_bounds(len(done) - len(ex), len(done))[0]
@@ -491,7 +505,11 @@ def diagnosis_version(commit: Optional[str], root: Optional[Path] = None) -> Opt
 def cached_rows(dirs: Sequence[str]) -> List[Dict[str, Any]]:
     """Every result cached under ``dirs`` (``DIR/results/*.json``, or ``*.json.gz`` as
     :func:`archive` keeps them), each re-classified from its stored output with this
-    script's :func:`classify`."""
+    script's :func:`classify`; a pair's truth made before the generator recorded
+    ``member_sigma`` gets it from ``results/member_sigma.json`` (``member_sigma.py``)."""
+    import member_sigma as ms
+
+    sizes = ms.load()
     rows: List[Dict[str, Any]] = []
     for d in dirs:
         files = sorted([*Path(d).glob("results/*.json"), *Path(d).glob("results/*.json.gz")])
@@ -503,7 +521,10 @@ def cached_rows(dirs: Sequence[str]) -> List[Dict[str, Any]]:
             except (ValueError, OSError):
                 print(f"note: {f} is not JSON (skipped)")
                 continue
-            row["outcome"] = classify(row["truth"], {**row["diagnosis"], "json": row.get("json")})
+            t = row["truth"]
+            if t.get("kind") == "pair" and not t.get("member_sigma") and all(k in t for k in ("engine", "family", "seed", "index")):
+                t["member_sigma"] = sizes.get(ms.key(t)) or {}
+            row["outcome"] = classify(t, {**row["diagnosis"], "json": row.get("json")})
             rows.append(row)
     return rows
 

@@ -72,6 +72,7 @@ and the run index).
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -433,6 +434,7 @@ class RunSpec:
     dropouts: bool = False
     biases: Dict[str, float] = field(default_factory=dict)  # a constant per channel (sensor biases; BIASES)
     effect_sigma: Dict[str, float] = field(default_factory=dict)  # filled by make_run
+    member_sigma: Dict[str, float] = field(default_factory=dict)  # pairs: filled by make_run (member_size)
     near_target_sigma: Optional[float] = None  # filled by calibrate_near
 
     @property
@@ -441,6 +443,8 @@ class RunSpec:
 
     def truth(self) -> Dict[str, Any]:
         d = asdict(self)
+        if not d["member_sigma"]:
+            del d["member_sigma"]  # only pairs have one (truths made before session 65 have none)
         d["hidden"] = sorted(self.effects)
         d["kind"] = ("nominal" if self.family == "nominal" else "disturbance" if self.family == "disturbance"
                      else "pair" if self.family == "pairs" else "effect")
@@ -1240,6 +1244,38 @@ def clean_channels(spec: RunSpec) -> Tuple[Dict[str, np.ndarray], Excitation]:
     raise ValueError(f"engine {spec.engine!r}: expected one of {ENGINES}")
 
 
+#: The channel groups (:data:`NOISE`'s keys) and their channels.
+GROUPS = {"tau": ["tau1", "tau2", "tau3"], "ee": ["ee_x", "ee_y", "ee_z"], "imu": [f"imu{i}_a{c}" for i in (1, 2) for c in "xyz"]}
+
+
+def _groups_present(spec: RunSpec) -> List[str]:
+    return [g for g in GROUPS if (g != "tau" or spec.channels != "no_torque") and (g != "ee" or spec.channels != "no_mocap")]
+
+
+def member_size(spec: RunSpec, clean: Optional[Mapping[str, np.ndarray]] = None) -> Dict[str, float]:
+    """How far each effect of a run with several moves the channels beside the others, in
+    noise sigmas of this run: per effect, the largest over the channel groups present of the
+    RMS of (noise-free truth − the same run made without that effect) / (NOISE ×
+    noise_scale), both from the run's own engine on the same motor trajectory (``clean``: the
+    run's noise-free channels, made here when not given). ``effect_size`` measures the
+    effects together against popup's nominal model; this measures what each adds, which
+    is what a diagnosis that has found the other can still see: a torsion beside a payload
+    that all but removes the tip mass (popup pair 710-001: payload −0.465 of 0.5 kg, the
+    torsion 0.20 σ) leaves nothing to find."""
+    if len(spec.effects) < 2:
+        return {}
+    if clean is None:
+        clean, _ = clean_channels(copy.deepcopy(spec))
+    out: Dict[str, float] = {}
+    for e in sorted(spec.effects):
+        s = copy.deepcopy(spec)
+        s.effects.pop(e)
+        c2, _ = clean_channels(s)
+        out[e] = _r(max(float(np.sqrt(np.mean(np.concatenate([np.asarray(clean[c]) - np.asarray(c2[c]) for c in GROUPS[g]]) ** 2)))
+                        / (NOISE[g] * spec.noise_scale) for g in _groups_present(spec)), 3)
+    return out
+
+
 def effect_size(clean: Mapping[str, np.ndarray], spec: RunSpec) -> Dict[str, float]:
     """How far the truth is from the declared nominal model, in noise sigmas of this run:
     per channel group present in the run, the RMS of (noise-free truth − popup's nominal
@@ -1352,9 +1388,11 @@ def calibrate_near(spec: RunSpec, exc: Excitation) -> None:
 
 def make_run(spec: RunSpec, out_dir: Any) -> Tuple[Path, Dict[str, Any]]:
     """Simulate, measure and write one run; returns (run folder, truth). The truth (also
-    in the run's description) includes ``effect_sigma`` (:func:`effect_size`)."""
+    in the run's description) includes ``effect_sigma`` (:func:`effect_size`) and, for a
+    run with several effects, ``member_sigma`` (:func:`member_size`)."""
     clean, _ = clean_channels(spec)
     spec.effect_sigma = effect_size(clean, spec)
+    spec.member_sigma = member_size(spec, clean)
     data = measure(clean, spec, _rng(spec.seed, spec.engine, spec.family, spec.index, "noise"))
     path = write(spec, data, out_dir)
     return path, _inf_to_str(spec.truth())

@@ -318,6 +318,26 @@ def test_runs_are_deterministic_from_the_seed(tmp_path):
         assert (m1 / "measurements.csv").read_bytes() == (m2 / "measurements.csv").read_bytes()
 
 
+def test_a_pair_records_what_each_effect_adds_beside_the_other(tmp_path):
+    """families.member_size: each effect of a pair measured against the same run made without
+    it; an effect at its neutral value adds nothing, and in the linear range twice the
+    strength adds twice as much (a payload error, popup engine)."""
+    sp = next(s for s in F.family_specs("pairs", "popup", 8, 3, duration=3.0) if set(s.effects) == {"joint_friction", "payload_mass"})
+    _, truth = F.make_run(dataclasses.replace(sp, effects={k: dict(v) for k, v in sp.effects.items()}), tmp_path)
+    ms = truth["member_sigma"]
+    assert set(ms) == {"joint_friction", "payload_mass"} and all(v > 1.0 for v in ms.values()), ms
+    small = dict(sp.effects["payload_mass"], delta_kg=1e-3)
+    big = dict(sp.effects["payload_mass"], delta_kg=2e-3)
+    a = F.member_size(dataclasses.replace(sp, effects={**sp.effects, "payload_mass": small}))["payload_mass"]
+    b = F.member_size(dataclasses.replace(sp, effects={**sp.effects, "payload_mass": big}))["payload_mass"]
+    assert 0.0 < a and b == pytest.approx(2.0 * a, rel=0.05), (a, b)
+    off = F.member_size(dataclasses.replace(sp, effects={**sp.effects, "payload_mass": {"delta_kg": 0.0}}))
+    assert off["payload_mass"] == 0.0 and off["joint_friction"] == pytest.approx(ms["joint_friction"], rel=1e-6)
+    assert F.member_size(F.family_specs("nominal", "popup", 1, 3)[0]) == {}
+    # single-effect and nominal truths have no such key (their stored truths stay the same)
+    assert "member_sigma" not in F.family_specs("payload_mass", "popup", 1, 3)[0].truth()
+
+
 def test_near_runs_are_calibrated_to_a_few_noise_sigmas(tmp_path):
     for kind in ("joint_friction", "payload_mass", "pressure_leak"):
         near = [sp for sp in F.family_specs(kind, "popup", 2, 0, duration=6.0) if sp.level == "near"][0]
@@ -371,6 +391,16 @@ def test_benchmark_classifies_diagnosis_output():
     assert bench.classify(pair, {"rc": 0, "json": tagged(swap), "failure": None})["ok"]
     late = [([], 10.0, 0), (["backlash"], 5.0, 1), (["backlash", "payload_mass"], 3.0, 2), (["backlash", "payload_mass", "joint_friction"], 0.1, 3)]
     assert not bench.classify(pair, {"rc": 0, "json": tagged(late), "failure": None})["ok"]
+    # a pair one of whose effects the other all but hides (below 1 sigma beside it) is
+    # counted apart: right when the other is found in two rounds and nothing else is blamed
+    hid = {**pair, "member_sigma": {"joint_friction": 0.2, "payload_mass": 40.0}}
+    one = [([], 10.0), (["payload_mass"], 0.05)]
+    c = bench.classify(hid, {"rc": 0, "json": _js(one), "failure": None})
+    assert c["kind"] == "pair_faint" and c["faint"] == ["joint_friction"] and c["ok"] and not c["both_in_two"]
+    assert not bench.classify(hid, {"rc": 0, "json": _js(one + [(["payload_mass", "air_drag"], 0.01)]), "failure": None})["ok"]
+    assert not bench.classify(hid, {"rc": 0, "json": _js([([], 10.0), (["air_drag"], 0.5)]), "failure": None})["ok"]
+    seen2 = bench.classify({**pair, "member_sigma": {"joint_friction": 1.5, "payload_mass": 40.0}}, {"rc": 0, "json": _js(one), "failure": None})
+    assert seen2["kind"] == "pair" and not seen2["ok"]
     dist = {"kind": "disturbance", "hidden": []}
     text = "A systematic error of 3 noise units is left that is not explained by the library (imu2_az)."
     assert bench.classify(dist, {"rc": 0, "json": _js([([], 3.0)], conclusion=text), "failure": None})["ok"]
@@ -758,6 +788,39 @@ def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_pat
     assert rerun.main([str(stored), "--out", str(out)]) == 0
     assert seen == [(path.name, True, out / "results" / f"{path.name}.json", ["--threads", "1"])], seen
     assert rerun.main([str(stored), "--out", str(out)]) == 0 and len(seen) == 1  # a result already there is kept
+
+
+def test_pairs_archived_before_member_sigma_get_it_from_the_table(tmp_path, monkeypatch):
+    """A pair's truth stored before the generator recorded ``member_sigma``: rerun.remake
+    makes the run again (the added key is no difference), benchmarks/member_sigma.py fills
+    the table from the spec drawn again (and skips a truth the generator no longer makes),
+    and --pool classifies the stored result with the table's sizes."""
+    import member_sigma as ms
+    import rerun
+
+    sp = F.family_specs("pairs", "popup", 2, 710)[1]
+    assert set(sp.effects) == {"payload_mass", "torsion"}
+    _, truth = F.make_run(sp, tmp_path / "first")
+    old = {k: v for k, v in truth.items() if k != "member_sigma"}
+    assert rerun.remake(old, tmp_path / "again").name == "popup-pairs-001"
+    with pytest.raises(ValueError, match="differs from the stored one"):
+        rerun.remake({**old, "noise_scale": old["noise_scale"] * 2}, tmp_path / "other")
+    js = _js([([], 10.0), (["payload_mass"], 0.05)])
+    res = tmp_path / "fam" / "results"
+    res.mkdir(parents=True)
+    # a truth the seed no longer draws (another noise scale) is skipped
+    (res / "a.json").write_text(json.dumps({"truth": {**old, "noise_scale": 1.0}, "diagnosis": {"rc": 0, "failure": None}, "json": js}))
+    table = tmp_path / "member_sigma.json"
+    assert ms.main([str(tmp_path / "fam"), "--table", str(table)]) == 0 and ms.load(table) == {}
+    (res / "a.json").write_text(json.dumps({"truth": old, "diagnosis": {"rc": 0, "failure": None}, "json": js, "run": "a"}))
+    assert ms.main([str(tmp_path / "fam"), "--table", str(table)]) == 0
+    sizes = ms.load(table)["popup/pairs/710/1"]
+    assert sizes["torsion"] < bench.DETECTABLE_SIGMA < sizes["payload_mass"], sizes
+    monkeypatch.setattr(ms, "TABLE", table)
+    row = bench.cached_rows([str(tmp_path / "fam")])[0]
+    assert row["outcome"]["kind"] == "pair_faint" and row["outcome"]["ok"]
+    monkeypatch.setattr(ms, "TABLE", tmp_path / "none.json")
+    assert bench.cached_rows([str(tmp_path / "fam")])[0]["outcome"]["kind"] == "pair"
 
 
 def test_equivalence_compares_every_number_the_classification_reads(tmp_path, capsys):
