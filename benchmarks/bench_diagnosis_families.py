@@ -196,7 +196,7 @@ def classify(truth: Dict[str, Any], res: Dict[str, Any]) -> Dict[str, Any]:
         faint = [e for e in hidden if math.isfinite(ms.get(e, math.nan)) and ms[e] < DETECTABLE_SIGMA]
         if faint:
             # an effect the other all but hides (beside it, it moves no channel group by
-            # DETECTABLE_SIGMA): no method can find it, as an effect run's below 1 σ; counted
+            # DETECTABLE_SIGMA): below detectability, as an effect run's below 1 σ; counted
             # apart, right when the others are found within two rounds and nothing that was
             # not hidden is in the final model
             final = set(str(e) for e in ((hist[-1].get("effects") or []) if hist else []))

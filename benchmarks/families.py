@@ -1261,7 +1261,7 @@ def member_size(spec: RunSpec, clean: Optional[Mapping[str, np.ndarray]] = None)
     effects together against popup's nominal model; this measures what each adds, which
     is what a diagnosis that has found the other can still see: a torsion beside a payload
     that all but removes the tip mass (popup pair 710-001: payload −0.465 of 0.5 kg, the
-    torsion 0.20 σ) leaves nothing to find."""
+    torsion 0.20 σ) is below the 1 σ the benchmark counts as detectable."""
     if len(spec.effects) < 2:
         return {}
     if clean is None:
