@@ -112,6 +112,8 @@ __all__ = [
 
 ENGINES = ("popup", "mujoco")
 NOISE: Dict[str, float] = dict(popup.synth.NOISE)
+#: The channel groups (:data:`NOISE`'s keys) and their channels.
+GROUPS = {"tau": ["tau1", "tau2", "tau3"], "ee": ["ee_x", "ee_y", "ee_z"], "imu": [f"imu{i}_a{c}" for i in (1, 2) for c in "xyz"]}
 ENCODER_RESOLUTION = popup.synth.ENCODER_RESOLUTION
 LIBRARY = list(popup.effects.EFFECT_NAMES)
 #: effects each engine can make (MuJoCo: see the module docstring for actuator_saturation)
@@ -459,13 +461,13 @@ def _json_default(o: Any) -> Any:
     raise TypeError(type(o).__name__)
 
 
-def _inf_to_str(v: Any) -> Any:
+def inf_to_str(v: Any) -> Any:
     if isinstance(v, float) and math.isinf(v):
         return "inf"
     if isinstance(v, (list, tuple)):
-        return [_inf_to_str(x) for x in v]
+        return [inf_to_str(x) for x in v]
     if isinstance(v, dict):
-        return {k: _inf_to_str(x) for k, x in v.items()}
+        return {k: inf_to_str(x) for k, x in v.items()}
     return v
 
 
@@ -1150,9 +1152,7 @@ def measure(clean: Mapping[str, np.ndarray], spec: RunSpec, rng: np.random.Gener
     res = encoder_resolution(spec.encoder_bits)
     for j in range(1, 4):
         out[f"q{j}"] = np.round(np.asarray(clean[f"q{j}"]) / res) * res
-    groups = {"tau": ["tau1", "tau2", "tau3"], "ee": ["ee_x", "ee_y", "ee_z"],
-              "imu": ["imu1_ax", "imu1_ay", "imu1_az", "imu2_ax", "imu2_ay", "imu2_az"]}
-    for g, cols in groups.items():
+    for g, cols in GROUPS.items():
         sd = NOISE[g] * spec.noise_scale
         for c in cols:
             e = rng.normal(0.0, sd, n)
@@ -1163,10 +1163,10 @@ def measure(clean: Mapping[str, np.ndarray], spec: RunSpec, rng: np.random.Gener
         for c in ("p1", "p2"):
             out[c] = np.asarray(clean[c], dtype=float) + rng.normal(0.0, PRESSURE_NOISE_PA, n)
     if spec.channels == "no_mocap":
-        for c in groups["ee"]:
+        for c in GROUPS["ee"]:
             del out[c]
     if spec.channels == "no_torque":
-        for c in groups["tau"]:
+        for c in GROUPS["tau"]:
             del out[c]
     if spec.dropouts:
         dur = float(t[-1] - t[0])
@@ -1174,7 +1174,7 @@ def measure(clean: Mapping[str, np.ndarray], spec: RunSpec, rng: np.random.Gener
             for _ in range(int(rng.poisson(max(1.0, dur / 3.0)))):
                 t0 = rng.uniform(t[0], t[-1])
                 m = (t >= t0) & (t < t0 + rng.uniform(0.02, 0.2))
-                for c in groups["ee"]:
+                for c in GROUPS["ee"]:
                     out[c][m] = np.nan
         for imu in ("imu1", "imu2"):
             m = rng.random(n) < 0.003
@@ -1182,14 +1182,14 @@ def measure(clean: Mapping[str, np.ndarray], spec: RunSpec, rng: np.random.Gener
                 out[f"{imu}_{c}"][m] = np.nan
         if "tau1" in out:
             m = rng.random(n) < 0.001
-            for c in groups["tau"]:
+            for c in GROUPS["tau"]:
                 out[c][m] = np.nan
     return {c: out[c] for c in MEAS_ORDER if c in out}
 
 
 def description(spec: RunSpec) -> str:
     return (f"synthetic lab run {spec.name} ({spec.engine} engine, family {spec.family}); "
-            f"truth = {json.dumps(_inf_to_str(spec.truth()), sort_keys=True)}")
+            f"truth = {json.dumps(inf_to_str(spec.truth()), sort_keys=True)}")
 
 
 def read_truth(run_or_path: Any) -> Dict[str, Any]:
@@ -1244,10 +1244,6 @@ def clean_channels(spec: RunSpec) -> Tuple[Dict[str, np.ndarray], Excitation]:
     raise ValueError(f"engine {spec.engine!r}: expected one of {ENGINES}")
 
 
-#: The channel groups (:data:`NOISE`'s keys) and their channels.
-GROUPS = {"tau": ["tau1", "tau2", "tau3"], "ee": ["ee_x", "ee_y", "ee_z"], "imu": [f"imu{i}_a{c}" for i in (1, 2) for c in "xyz"]}
-
-
 def _groups_present(spec: RunSpec) -> List[str]:
     return [g for g in GROUPS if (g != "tau" or spec.channels != "no_torque") and (g != "ee" or spec.channels != "no_mocap")]
 
@@ -1295,11 +1291,8 @@ def effect_size(clean: Mapping[str, np.ndarray], spec: RunSpec) -> Dict[str, flo
     uniform = len(tt) == len(t) and float(np.abs(tt - t).max()) < 1e-9
     r = nom.replay(tt, q if uniform else CubicSpline(t, q)(tt), sample_rate=rate)
     out: Dict[str, float] = {}
-    groups = {"tau": ["tau1", "tau2", "tau3"], "ee": ["ee_x", "ee_y", "ee_z"], "imu": [f"imu{i}_a{c}" for i in (1, 2) for c in "xyz"]}
-    present = {"tau": spec.channels != "no_torque", "ee": spec.channels != "no_mocap", "imu": True}
-    for g, cols in groups.items():
-        if not present[g]:
-            continue
+    for g in _groups_present(spec):
+        cols = GROUPS[g]
         e = np.concatenate([clean[c] - (np.asarray(r.channel(c)) if uniform else CubicSpline(tt, np.asarray(r.channel(c)))(t)) for c in cols])
         out[g] = _r(float(np.sqrt(np.mean(e**2)) / (NOISE[g] * spec.noise_scale)), 3)
     return out
@@ -1357,8 +1350,7 @@ def calibrate_near(spec: RunSpec, exc: Excitation) -> None:
     tf = np.arange(0.0, spec.duration + 1e-9, 2e-3)
     qf = exc(tf)
     r0 = nom.replay(tf, qf, sample_rate=500)
-    groups = {"tau": ["tau1", "tau2", "tau3"], "ee": ["ee_x", "ee_y", "ee_z"], "imu": [f"imu{i}_a{c}" for i in (1, 2) for c in "xyz"]}
-    present = [g for g in groups if (g != "tau" or spec.channels != "no_torque") and (g != "ee" or spec.channels != "no_mocap")]
+    present = _groups_present(spec)
 
     def sigma(p: Mapping[str, Any]) -> float:
         pp = {k: v for k, v in p.items() if k in popup.effects.EFFECTS[name].params}
@@ -1370,7 +1362,7 @@ def calibrate_near(spec: RunSpec, exc: Excitation) -> None:
         r1 = m1.replay(tf, qf, sample_rate=500)
         best = 0.0
         for g in present:
-            e = np.concatenate([np.asarray(r1.channel(c)) - np.asarray(r0.channel(c)) for c in groups[g]])
+            e = np.concatenate([np.asarray(r1.channel(c)) - np.asarray(r0.channel(c)) for c in GROUPS[g]])
             best = max(best, float(np.sqrt(np.mean(e**2))) / (NOISE[g] * spec.noise_scale))
         return best
 
@@ -1395,7 +1387,7 @@ def make_run(spec: RunSpec, out_dir: Any) -> Tuple[Path, Dict[str, Any]]:
     spec.member_sigma = member_size(spec, clean)
     data = measure(clean, spec, _rng(spec.seed, spec.engine, spec.family, spec.index, "noise"))
     path = write(spec, data, out_dir)
-    return path, _inf_to_str(spec.truth())
+    return path, inf_to_str(spec.truth())
 
 
 # ============================================================================ families

@@ -44,7 +44,7 @@ def spec_of(truth: Dict[str, Any]) -> Optional[F.RunSpec]:
     differs from ``truth`` (apart from what :func:`families.make_run` fills in)."""
     i = int(truth["index"])
     sp = F.family_specs(str(truth["family"]), str(truth["engine"]), i + 1, int(truth["seed"]), biases=bool(truth.get("biases")))[i]
-    now = F._inf_to_str(sp.truth())
+    now = F.inf_to_str(sp.truth())
     strip = lambda d: json.dumps({k: v for k, v in d.items() if k not in MADE}, sort_keys=True, default=str)  # noqa: E731
     return sp if strip(now) == strip(truth) else None
 
