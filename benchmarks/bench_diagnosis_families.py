@@ -219,7 +219,9 @@ def popup_law(name: str, params: Dict[str, Any], engine: str) -> Optional[Dict[s
     """``name``'s true parameters in popup's law, or ``None`` where the engine wrote it
     another way. popup runs: the parameters popup knows. MuJoCo runs (:data:`MAPPED_MUJOCO`):
     friction with the generator's sign width (``FRICTION_VEPS``); backlash with its link-side
-    inertia (``BACKLASH_OUT``) and, for a compliant gear, flanks of its ``gear_k``/``gear_d``
+    inertia (``BACKLASH_OUT``; the same law only on runs whose truth has a ``gear``: before
+    session 67 the generator put that inertia on the play coordinate) and, for a compliant
+    gear, flanks of its ``gear_k``/``gear_d``
     (else popup's rigid plastic flanks for the stiff 1e7 N·m/rad contact); a payload of the
     same centre; a delay per group."""
     import popup

@@ -38,9 +38,14 @@ Two engines make the "real arm":
                        tip sag (horizontal pose) equals the one-joint arm's
   air_drag             quadratic drag per unit length on every tube piece (8 points per
                        outer piece) as ``xfrc_applied``
-  backlash             a rotor body (motor dof, armature, servo, encoder) and a link-side
-                       hinge on the same axis (play coordinate, 0.1 kg·m² of gear output
-                       inertia), coupled by a dead-zone gear contact (K = 1e7 N·m/rad,
+  backlash             a rotor body (motor dof, armature, servo, encoder) and, beside it on
+                       the same axis, the link-side hinge (its own angle, with 0.1 kg·m² of
+                       gear output inertia that turns with the link: the two-mass flexible
+                       joint of Spong; until session 67 this inertia sat on the play
+                       coordinate, the link angle minus the rotor's, a kinetic energy no
+                       gear has, which popup's law could not replay on a compliant gear:
+                       the truth's ``gear`` says which), coupled by a dead-zone gear
+                       contact on the play q_link − q_rotor (K = 1e7 N·m/rad,
                        1000 N·m·s/rad, in contact only; in half the "above" runs a compliant
                        gear, ``gear_k`` 1e4-1e5 N·m/rad at damping ratio 0.2-0.5) - link side free inside the gap,
                        resting against the side its load pushes it to; with ``held`` (the
@@ -447,6 +452,8 @@ class RunSpec:
         d = asdict(self)
         if not d["member_sigma"]:
             del d["member_sigma"]  # only pairs have one (truths made before session 65 have none)
+        if self.engine == "mujoco" and "backlash" in self.effects and not any(self.effects["backlash"].get("held", [])):
+            d["gear"] = GEAR_MODEL
         d["hidden"] = sorted(self.effects)
         d["kind"] = ("nominal" if self.family == "nominal" else "disturbance" if self.family == "disturbance"
                      else "pair" if self.family == "pairs" else "effect")
@@ -653,6 +660,9 @@ BACKLASH_D = 1000.0
 #: for any explicit step (here ω ≈ 1e4 rad/s); in contact it does nothing. With a gap of
 #: 1e-7 rad the arm differs from the nominal one by 0.2 noise sigma (the gear compliance)
 BACKLASH_OUT = 0.1
+#: how a MuJoCo run's gear with play is built (the truth's ``gear``; runs made before
+#: session 67 have none: their output inertia sat on the play coordinate)
+GEAR_MODEL = "two-mass: rotor and link side siblings, output inertia on the link angle"
 FRICTION_VEPS = 0.003
 DRAG_RHO = 1.204
 WRINKLE_WIDTH = 0.05
@@ -748,8 +758,10 @@ class MujocoArm:
                 mi = nmotor
                 nmotor += 1
                 if float(gaps[mi]) > 0:
-                    # rotor: the whole armature; the gear's link side gets a small inertia of its
-                    # own on the play coordinate (only felt while the link moves in the gap)
+                    # the two sides of the gear as siblings on the same axis (the flexible joint
+                    # of Spong): a massless rotor body with the whole armature, and the link side
+                    # with a small inertia of its own on its own angle (the gear's output inertia,
+                    # which turns with the link); the contact acts on their difference
                     rows.append(_plain_row(f"rotor{mi + 1}", "rotor", [0, 0, 1], armature=arm_r[mi], motor=mi))
                     rows.append(_dh_row(j["name"], "play", j["d"], j["a"], j["alpha"], off, parts, armature=BACKLASH_OUT, motor=mi, body=f"body{i + 1}"))
                 else:
@@ -796,7 +808,16 @@ class MujocoArm:
             "  <worldbody>",
         ]
         ind = "    "
+        nested = 0
         for r in self.rows:
+            if r.kind == "rotor":
+                # a leaf beside the link side it drives (its sibling), not its parent
+                lines.append(f'{ind}<body name="{r.body}" pos="{fs(r.pos)}" quat="{fs(r.quat)}">')
+                lines.append(f'{ind}  <joint name="{r.name}" type="hinge" axis="{fs(r.axis)}" pos="{fs(r.jpos)}" armature="{f(r.armature)}"/>')
+                lines.append(f'{ind}  <inertial pos="0 0 0" mass="{f(mjcf.MASSLESS_KG)}" diaginertia="{fs([mjcf.MASSLESS_INERTIA] * 3)}"/>')
+                lines.append(f"{ind}</body>")
+                continue
+            nested += 1
             lines.append(f'{ind}<body name="{r.body}" pos="{fs(r.pos)}" quat="{fs(r.quat)}">')
             attrs = f'name="{r.name}" type="hinge" axis="{fs(r.axis)}" pos="{fs(r.jpos)}"'
             if r.armature:
@@ -817,7 +838,7 @@ class MujocoArm:
             if r.body == f"body{ee['body']}":
                 lines.append(f'{ind}  <site name="ee" pos="{fs(ee["position_m"])}"/>')
             ind += "  "
-        for _ in self.rows:
+        for _ in range(nested):
             ind = ind[:-2]
             lines.append(f"{ind}</body>")
         lines.append("  </worldbody>")
@@ -843,7 +864,8 @@ class MujocoArm:
         drive = {r.motor: r.name for r in self.rows if r.kind in ("motor", "rotor")}
         self.motor_dof = [self.dof[drive[i]] for i in range(3)]
         self.motor_q = [self.qadr[drive[i]] for i in range(3)]
-        self.play = [(r.motor, self.dof[r.name], self.qadr[r.name]) for r in self.rows if r.kind == "play"]
+        #: (motor index, link-side dof, link-side qpos address, rotor dof, rotor qpos address)
+        self.play = [(r.motor, self.dof[r.name], self.qadr[r.name], self.motor_dof[r.motor], self.motor_q[r.motor]) for r in self.rows if r.kind == "play"]
         self.armature = np.array(self.spec["motors"]["armature_kgm2"], dtype=float)
         self.kp = self.armature * SERVO_W**2
         self.kv = 2 * SERVO_ZETA * self.armature * SERVO_W
@@ -901,15 +923,16 @@ class MujocoArm:
             q = d.qpos
             half = self.effects["backlash"]["gap"]
             gk, gd = self.gear_kd
-            for mi, dof, qa in self.play:
-                x, xd = q[qa], v[dof]
+            for mi, dof, qa, rdof, rqa in self.play:
+                x, xd = q[qa] - q[rqa], v[dof] - v[rdof]
                 h = 0.5 * half[mi]
+                f = 0.0
                 if x > h:
-                    f = -gk * (x - h) - gd * xd
-                    qf[dof] += min(f, 0.0)
+                    f = min(-gk * (x - h) - gd * xd, 0.0)
                 elif x < -h:
-                    f = -gk * (x + h) - gd * xd
-                    qf[dof] += max(f, 0.0)
+                    f = max(-gk * (x + h) - gd * xd, 0.0)
+                qf[dof] += f
+                qf[rdof] -= f
         wr = self.effects.get("wrinkling")
         if wr:
             q = d.qpos
@@ -978,8 +1001,8 @@ class MujocoArm:
         q0 = np.zeros(m.nq)
         for i in range(3):
             q0[self.motor_q[i]] = q_motor[i]
-        for mi, dof, qa in self.play:
-            q0[qa] = 0.0
+        for mi, dof, qa, rdof, rqa in self.play:
+            q0[qa] = q_motor[mi]
 
         def res(x: np.ndarray) -> np.ndarray:
             d.qpos[:] = x
@@ -994,12 +1017,13 @@ class MujocoArm:
         for _ in range(3):
             if self.play:
                 # the gear contact is flat inside the gap: put each link side against the
-                # side its load pushes it to (x = ±gap/2 + load/K) before the smooth solve
+                # side its load pushes it to (x = ±gap/2 + load/K past the rotor) before the
+                # smooth solve
                 r = res(x)
                 gaps = self.effects["backlash"]["gap"]
-                for mi, dof, qa in self.play:
+                for mi, dof, qa, rdof, rqa in self.play:
                     load = r[dof] - (d.qfrc_applied[dof])
-                    x[qa] = (math.copysign(0.5 * gaps[mi], load) + load / self.gear_kd[0]) if abs(load) > 1e-9 else 0.0
+                    x[qa] = x[rqa] + ((math.copysign(0.5 * gaps[mi], load) + load / self.gear_kd[0]) if abs(load) > 1e-9 else 0.0)
             x = _newton(res, x)
             if np.abs(res(x)).max() < 1e-8:
                 break

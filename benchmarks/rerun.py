@@ -47,8 +47,10 @@ def remake(truth: Dict[str, Any], out: Path) -> Path:
     now = {k: v for k, v in now.items() if k in truth or k not in LATER_KEYS}
     a, b = json.dumps(now, sort_keys=True, default=str), json.dumps(truth, sort_keys=True, default=str)
     if a != b:
-        raise ValueError(f"{path.name}: the truth made now differs from the stored one (seed {truth['seed']}, index {i}): "
-                         "drawn with overrides, or the generator changed")
+        keys = sorted(k for k in set(now) | set(truth) if json.dumps(now.get(k), sort_keys=True, default=str) != json.dumps(truth.get(k), sort_keys=True, default=str))
+        raise ValueError(f"{path.name}: the truth made now differs from the stored one (seed {truth['seed']}, index {i}; "
+                         f"differing keys: {', '.join(keys)}): drawn with overrides, or the generator changed (a MuJoCo "
+                         "backlash run made before session 67 has no 'gear': its gear cannot be made again)")
     return path
 
 

@@ -110,9 +110,19 @@ def test_mujoco_backlash_rests_against_the_gap_and_higher_modes_keep_the_static_
     nominal = popup.Model("popup-lab", payload_kg=1.0)
     arm = F.MujocoArm(1.0, (30e3, 30e3), {"backlash": {"gap": [0.01, 0.02, 0.02]}})
     q = arm.rest((0.0, 0.0, 0.0))
-    for mi, dof, qa in arm.play:
+    for mi, dof, qa, rdof, rqa in arm.play:
         if mi > 0:  # gravity-loaded joints: the link side hangs on one flank of the gap
-            assert abs(abs(q[qa]) - 0.01) < 1e-4, (mi, q[qa])
+            assert abs(abs(q[qa] - q[rqa]) - 0.01) < 1e-4, (mi, q[qa], q[rqa])
+    # the rotor and the link side are siblings (the output inertia turns with the link), and
+    # a run's truth says so; a held gap (no play dof) and the popup engine have no such gear
+    for mi, dof, qa, rdof, rqa in arm.play:
+        rb, lb = arm.m.dof_bodyid[rdof], arm.m.dof_bodyid[dof]
+        assert arm.m.body_parentid[rb] == arm.m.body_parentid[lb] and rb != lb, (mi, rb, lb)
+    bl = {"backlash": {"gap": [0.01, 0.02, 0.02]}}
+    assert F.RunSpec(engine="mujoco", family="backlash", index=0, seed=1, effects=bl).truth()["gear"] == F.GEAR_MODEL
+    held = {"backlash": {"gap": [0.01, 0.02, 0.02], "held": [1.0, 1.0, 1.0]}}
+    assert "gear" not in F.RunSpec(engine="mujoco", family="backlash", index=0, seed=1, effects=held).truth()
+    assert "gear" not in F.RunSpec(engine="popup", family="backlash", index=0, seed=1, effects=bl).truth()
     hbm = F.MujocoArm(1.0, (30e3, 30e3), {"higher_bending_modes": {"k_scale": [1.0, 1.0]}})
     q = hbm.rest((0.0, 0.0, 0.0))
     hbm.d.qpos[:] = q
@@ -774,7 +784,7 @@ def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_pat
     again = rerun.remake(truth, tmp_path / "again")
     assert again.name == path.name and F.read_truth(again) == F.read_truth(path)
     assert (again / "measurements.csv").read_bytes() == (path / "measurements.csv").read_bytes()
-    with pytest.raises(ValueError, match="differs from the stored one"):
+    with pytest.raises(ValueError, match="differs from the stored one .*differing keys: noise_scale\\)"):
         rerun.remake({**truth, "noise_scale": truth["noise_scale"] * 2}, tmp_path / "other")
     seen = []
 
@@ -1422,9 +1432,13 @@ def _soft_gear_run(tmp_path, gear_k=2e4, gear_d=40.0, gap=0.03):
 
 def test_compliant_flanks_replay_another_engines_compliant_gear(tmp_path):
     """popup's compliant flanks (``contact_k``, ``contact_c``) against MuJoCo's gear contact
-    (the same unilateral spring-damper, written as MuJoCo applied forces on a rotor with its
-    own servo): at the truth's values they replay the run far better than the rigid flanks
-    at the truth's gap and link-side inertia, on every channel group the gear moves."""
+    (the same unilateral spring-damper, written as MuJoCo applied forces between a rotor with
+    its own servo and the link side beside it, the output inertia on the link's angle): at
+    the truth's values they replay the run at the noise floor, every channel within a few
+    noise sigmas (measured: 0.70 overall, tau2 at 2.54 σ, the rest 0.98-1.12), far better
+    than the rigid flanks at the truth's gap and link-side inertia. With the output inertia
+    on the play coordinate instead (the generator before session 67) the same truth replayed
+    at 21 σ: the laws differed, not the numbers."""
     from popup.problem import ReplayProblem
 
     run = _soft_gear_run(tmp_path)
@@ -1436,7 +1450,8 @@ def test_compliant_flanks_replay_another_engines_compliant_gear(tmp_path):
     (s_rigid, rigid_c), (s_soft, soft_c) = base.with_model(rigid).error(), base.with_model(soft).error()
     for c in ("ee_z", "imu1_ay", "imu2_ax", "imu2_ay", "tau3"):
         assert soft_c[c] < 0.3 * rigid_c[c], (c, soft_c, rigid_c)
-    assert s_soft < 0.3 * s_rigid, (s_soft, s_rigid)
+    assert s_soft < 0.05 * s_rigid, (s_soft, s_rigid)
+    assert s_soft < 1.5 and max(soft_c.values()) < 4.0, (s_soft, soft_c)
 
 
 @pytest.mark.slow
