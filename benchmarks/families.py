@@ -113,6 +113,26 @@ __all__ = [
     "family_specs",
     "engine_agreement",
     "read_truth",
+    "popup_effects",
+    "effect_size",
+    "member_size",
+    "inf_to_str",
+    "encoder_resolution",
+    "check_rates",
+    "pose_range",
+    "NOISE",
+    "GROUPS",
+    "LIBRARY",
+    "NEEDS_TORQUE",
+    "OTHER_RATES",
+    "CHANNEL_SETS",
+    "BIASES",
+    "MEAS_ORDER",
+    "OUT_CHANNELS",
+    "SERVO_W",
+    "FRICTION_VEPS",
+    "BACKLASH_OUT",
+    "GEAR_MODEL",
 ]
 
 ENGINES = ("popup", "mujoco")
@@ -479,7 +499,7 @@ def inf_to_str(v: Any) -> Any:
 
 
 # ============================================================================ popup engine
-def _popup_effects(effects: Mapping[str, Mapping[str, Any]]) -> Dict[str, Dict[str, Any]]:
+def popup_effects(effects: Mapping[str, Mapping[str, Any]]) -> Dict[str, Dict[str, Any]]:
     return {e: {k: (np.array(v, dtype=float) if isinstance(v, (list, tuple)) else v) for k, v in p.items()} for e, p in effects.items()}
 
 
@@ -488,7 +508,7 @@ def simulate_popup(spec: RunSpec, exc: Excitation, stamps: np.ndarray) -> Dict[s
     model = the declared one with ``spec.effects``), plus the disturbance added to the
     measured channels (popup cannot put a torque on a bending joint in a replay)."""
     nominal = popup.Model("popup-lab", payload_kg=spec.payload_kg, pressure_pa=spec.pressure_pa, dt=POPUP_TRUTH_DT)
-    truth = nominal.with_effects(_popup_effects(spec.effects)) if spec.effects else nominal
+    truth = nominal.with_effects(popup_effects(spec.effects)) if spec.effects else nominal
     tf = np.arange(0.0, spec.duration + 1e-9, POPUP_TRUTH_DT)
     res = truth.replay(tf, exc(tf), sample_rate=1.0 / POPUP_TRUTH_DT)
     ts = np.asarray(res.channel("t"))
@@ -1378,7 +1398,7 @@ def calibrate_near(spec: RunSpec, exc: Excitation) -> None:
 
     def sigma(p: Mapping[str, Any]) -> float:
         pp = {k: v for k, v in p.items() if k in popup.effects.EFFECTS[name].params}
-        m1 = nom.with_effects({name: _popup_effects({"x": pp})["x"]})
+        m1 = nom.with_effects({name: popup_effects({"x": pp})["x"]})
         # a stiff structural mode (torsion) needs a smaller step than the nominal's 1 ms
         sdt = m1.with_dt(1.0).stable_dt([float(x) for x in m1.rest_state()], replay=True)
         if 0.8 * sdt < m1.dt:

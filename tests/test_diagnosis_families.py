@@ -1272,7 +1272,7 @@ def test_the_encoder_floor_of_a_gear_with_play_is_its_own(tmp_path):
         run = _read(path)
         nominal = ReplayProblem(run.model(), run, threads=1)
         nominal.encoder_sigma  # the nominal model's bootstrap (the one derived problems share)
-        truth = nominal.with_model(run.model().with_effects(F._popup_effects(sp.effects)))
+        truth = nominal.with_model(run.model().with_effects(F.popup_effects(sp.effects)))
         own = truth.with_encoder_sigma(truth.encoder_bootstrap())
         err, per = truth.error()
         where = f"run {i}: gaps {sp.effects['backlash']['gap']}, noise × {sp.noise_scale}, S {err:.3g}"
@@ -1462,15 +1462,17 @@ def test_a_compliant_gear_is_diagnosed_as_compliant_flanks(tmp_path):
     The rigid flanks with a fitted inertia win the variant round here (compliant flanks at
     the default inertia: BIC gain −11 over them), so the compliant flanks are found only as
     their combination with the inertia, started from each variant's own fit. Measured
-    (session 21): gap 31.1 mrad (truth 30), k_c 2.85e4 (2e4), J_out 0.051 (0.1): the
-    stiffness and the inertia are pinned only within a factor 2 (an open item)."""
+    (session 21, the output inertia on the play coordinate): gap 31.1 mrad (truth 30), k_c
+    2.85e4 (2e4), J_out 0.051 (0.1), pinned only within a factor 2. Session 67, the gear
+    built as a two-mass joint: gap 29.65 mrad, k_c 1.91e4, J_out 0.0953, each within 5 %
+    (210 s); held to 25 %."""
     run = _soft_gear_run(tmp_path)
     d = popup.diagnose(run.model(), run, effects=["backlash"], threads=1)
     s = d.suspects[0]
     assert s.significant and "compliant flanks" in s.variant and "inertia" in s.variant, (s.variant, s.message)
     assert abs(s.params["gap"][1] - 0.03) < 0.05 * 0.03, s.params
-    assert 0.5 * 2e4 < s.params["contact_k"][1] < 2.0 * 2e4, s.params
-    assert 0.5 * 0.1 < s.params["inertia"][1] < 2.0 * 0.1, s.params
+    assert 0.75 * 2e4 < s.params["contact_k"][1] < 1.25 * 2e4, s.params
+    assert 0.75 * 0.1 < s.params["inertia"][1] < 1.25 * 0.1, s.params
 
 
 def _quiet_mujoco_nominal(n, seed, i, bits, tmp_path):
