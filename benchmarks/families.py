@@ -45,7 +45,10 @@ Two engines make the "real arm":
                        coordinate, the link angle minus the rotor's, a kinetic energy no
                        gear has, which popup's law could not replay on a compliant gear:
                        the truth's ``gear`` says which), coupled by a dead-zone gear
-                       contact on the play q_link − q_rotor (K = 1e7 N·m/rad,
+                       contact on the play q_link − q_rotor; the torque channel reads the
+                       torque between the gear's output and the link (a joint torque
+                       sensor: the contact torque less J_out·q̈_link, as popup's rigid
+                       flanks and the arm without play read it) (K = 1e7 N·m/rad,
                        1000 N·m·s/rad, in contact only; in half the "above" runs a compliant
                        gear, ``gear_k`` 1e4-1e5 N·m/rad at damping ratio 0.2-0.5) - link side free inside the gap,
                        resting against the side its load pushes it to; with ``held`` (the
@@ -681,8 +684,10 @@ BACKLASH_D = 1000.0
 #: 1e-7 rad the arm differs from the nominal one by 0.2 noise sigma (the gear compliance)
 BACKLASH_OUT = 0.1
 #: how a MuJoCo run's gear with play is built (the truth's ``gear``; runs made before
-#: session 67 have none: their output inertia sat on the play coordinate)
-GEAR_MODEL = "two-mass: rotor and link side siblings, output inertia on the link angle"
+#: session 67 have none: their output inertia sat on the play coordinate; at c9b456d the
+#: torque was read at the gear, the output inertia's own torque in it, without "; torque
+#: read at the link")
+GEAR_MODEL = "two-mass: rotor and link side siblings, output inertia on the link angle; torque read at the link"
 FRICTION_VEPS = 0.003
 DRAG_RHO = 1.204
 WRINKLE_WIDTH = 0.05
@@ -1093,6 +1098,9 @@ class MujocoArm:
         qrec = np.zeros((len(need), m.nq))
         md, mq = self.motor_dof, self.motor_q
         arm = self.armature
+        # a gear with play: the torque is read between the gear's output and the link (a joint
+        # torque sensor), so the output inertia's own torque is not in it
+        out_dof = [(mi, dof) for mi, dof, _, _, _ in self.play]
         a1, a2 = self.sens_adr
         ee = self.ee_site
         two_over_h = 2.0 / dt
@@ -1131,6 +1139,8 @@ class MujocoArm:
                     r[3] = af[0] - arm[0] * d.qacc[md[0]]
                     r[4] = af[1] - arm[1] * d.qacc[md[1]]
                     r[5] = af[2] - arm[2] * d.qacc[md[2]]
+                    for mi, dof in out_dof:
+                        r[3 + mi] -= BACKLASH_OUT * d.qacc[dof]
                     r[6:9] = d.site_xpos[ee]
                     r[9:12] = d.sensordata[a1:a1 + 3]
                     r[12:15] = d.sensordata[a2:a2 + 3]
