@@ -714,6 +714,19 @@ def _first_pair_took(row: Dict[str, Any]) -> bool:
     return any(len(sig1 - {e}) >= 2 for e in ones)
 
 
+def _compliant_took(row: Dict[str, Any]) -> bool:
+    """Whether the classification of ``row`` may depend on backlash's compliant flanks (the
+    change after version ``032f6f95c69f``: their torque channel reads the gear's torque less
+    the output inertia's own J_out·q̈, where it read the gear's). Only a model with
+    ``contact_k`` > 0 computes anything else, and the diagnosis builds one only as backlash's
+    variant "compliant flanks" (tried where backlash is significant or its base law beats the
+    nominal model by the threshold), whose every fit leaves its name in that round's suspect
+    message, and through a model that kept it; read conservatively, a pair or rival step that
+    fitted backlash and kept something (whose fits are not reported) took it too."""
+    js = row.get("json") or {}
+    return "compliant flanks" in json.dumps(js) or _play_took(row, lambda g, c, w: True)
+
+
 def _took(marker: Union[str, PathTest], row: Dict[str, Any]) -> bool:
     if isinstance(marker, PathTest):
         return marker.took(row)

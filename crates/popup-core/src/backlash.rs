@@ -32,9 +32,12 @@
 //! At rest (no initial state given) each link side lies on the flank its static load
 //! pushes it to; an unloaded one (e.g. a vertical axis) sits in the middle of its gap.
 //!
-//! The torque channel (`tau*`) reads the torque between the gear and the link, as without
-//! play: `(M q̈ + b − τ_drag)_p` plus the motor's friction at the motor's speed, so it is 0
-//! (up to the link-side inertia's own torque and friction) while the link side is free.
+//! The torque channel (`tau*`) reads the torque between the gear's output and the link, as
+//! without play: `(M q̈ + b − τ_drag)_p` plus the motor's friction at the motor's speed, so
+//! it is 0 (up to friction) while a rigid gear's link side is free. Compliant flanks read
+//! the same place: `τ_g − J_out q̈_l` (the gear's torque less its output inertia's own), so
+//! as k_c → ∞ they read what the rigid flanks read (until session 67 they read τ_g, and
+//! did not).
 
 use crate::drive::Drive;
 use crate::dynamics::rnea;

@@ -229,9 +229,10 @@ pub fn sample_free(model: &Model, pd: &ParamData, drive: &Drive, t: f64, q: &Vec
         row[1 + k] = qk;
         row[4 + k] = vk;
         // row i of M q̈ + b (minus external loads), plus the motoreducer's own friction; a
-        // compliant flank's torque is the gear's (the link side's inertia is behind it)
+        // compliant flank's: the gear's torque less the output inertia's own J_out·q̈, so that
+        // both flank laws read the torque between the gear's output and the link
         let mut tau = if fx.backlash.compliant(k) && free[k] {
-            crate::backlash::contact_torque(&fx.backlash, k, q[i] - qk, v[i] - vk)
+            crate::backlash::contact_torque(&fx.backlash, k, q[i] - qk, v[i] - vk) - fx.backlash.inertia[k] * qdd[i]
         } else {
             let mut t_row = mat_vec_row(&m, &qdd, i, model.nv) + b[i];
             if let Some(dr) = &drag {

@@ -1,7 +1,8 @@
 //! The `backlash` gear with compliant flanks (`contact_k > 0`, `popup_core::backlash`) tested
 //! against physics: a loaded link rests at the flank plus its static deflection G/k_c (the
 //! rigid gear with the encoder shifted by that much), a stiff and heavily damped flank
-//! converges to the rigid law's plastic impact, and the step check sees the contact's
+//! converges to the rigid law's plastic impact, a stiff flank that never leaves its load
+//! reads the rigid flank's torque (both at the link), and the step check sees the contact's
 //! stiffness.
 
 mod common;
@@ -116,4 +117,44 @@ fn the_step_check_sees_the_contact_stiffness_and_rigid_flanks_are_the_default() 
     neutral.backlash.contact_k = [1e8; 3];
     neutral.backlash.contact_c = [10.0; 3];
     assert!(neutral.is_neutral("backlash"));
+}
+
+#[test]
+fn both_flank_laws_read_the_torque_at_the_link() {
+    // joint 2 rocks under gravity without leaving its flank: a stiff compliant flank then
+    // moves the link as the rigid flank does (the encoder shifted by the static deflection),
+    // and its torque channel must read what the rigid flank's does, the torque between the
+    // gear's output and the link, not the gear's, which also carries J_out·q̈ of the gear's
+    // own output inertia (0.2 kg·m² here: up to 0.23 N·m of difference). Measured: 2.95e-3
+    // N·m at k_c = 1e7 (2.95e-2 at 1e6: first order in 1/k_c); 0.255 with the gear's torque
+    // read, as before session 67
+    let m = model(2e-5);
+    let (gap, k, c, j) = (0.02, 1e7, 3000.0, 0.2);
+    // up and back by a_m over 2T with a quintic ramp each way (no jump in q̈), |q̈| ≤ a_m·(10/√3)/T²
+    let (a_m, tt) = (0.05, 0.5);
+    let t: Vec<f64> = (0..=500).map(|k| k as f64 * 2e-3).collect();
+    let q0 = [0.2, -FRAC_PI_2 + 1.1, 0.3];
+    let y: Vec<[f64; 3]> = t.iter().map(|&t| [q0[0], q0[1] + a_m * (ramp(t / tt) - ramp((t - tt) / tt)), q0[2]]).collect();
+    let mut fx = Effects::default();
+    fx.backlash.gap = [0.0, gap, 0.0];
+    fx.backlash.inertia = [0.01, j, 0.01];
+    fx.backlash.contact_k = [0.0, k, 0.0];
+    fx.backlash.contact_c = [0.0, c, 0.0];
+    let a = replay_2ms(&m, fx, &t, &y);
+    let p0 = lab_pd(&m, Effects::default());
+    let st = popup_core::sim::rest_state(&m, &p0, 0.0, q0).unwrap();
+    let g = gravity_torque(&m, &p0, &st.q)[m.motor_idx[1]];
+    assert!(g.abs() > 1.0, "the pose must load joint 2 ({g} N·m)");
+    let shift = -g.signum() * gap / 2.0 - g / k;
+    let ys: Vec<[f64; 3]> = y.iter().map(|r| [r[0], r[1] + shift, r[2]]).collect();
+    let b = replay_2ms(&m, Effects::default(), &t, &ys);
+    let d = max_abs_diff(&a, &b, "tau2");
+    let jqdd = j * a_m * (10.0 / 3f64.sqrt()) / (tt * tt);
+    eprintln!("tau2 differs by {d:e} N·m; J_out·q̈ peaks at {jqdd}");
+    assert!(d < 0.05 * jqdd, "tau2 of the compliant flank differs from the rigid flank's by {d} N·m (J_out·q̈ = {jqdd})");
+    for ch in ["ee_x", "ee_z", "imu2_ax", "imu2_az"] {
+        let dd = max_abs_diff(&a, &b, ch);
+        let scale = col(&b, ch).iter().map(|x| x.abs()).fold(0.0, f64::max).max(1e-3);
+        assert!(dd < 1e-3 * scale, "{ch}: {dd:e} (scale {scale})");
+    }
 }
