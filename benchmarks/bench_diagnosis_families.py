@@ -805,6 +805,18 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "backlash-001, pairs 662-001 and 008, all right with the same rounds (fam_rr63a/b/c_3777aa5)",
                      PathTest(_first_pair_took, "no one-effect model with nothing significant beside it and two other "
                               "significant candidates in round 1")),
+    "032f6f95c69f": ("a11dfdf18670",
+                     "05dec7d: backlash's compliant flanks read the torque between the gear's output and the link "
+                     "(the gear's torque less J_out·q̈ of its output inertia), as its rigid flanks do; sensor.rs only",
+                     "only a model with contact_k > 0 computes anything else, and the diagnosis builds one only as "
+                     "backlash's variant 'compliant flanks', whose every fit leaves its name in the round's suspect "
+                     "message; a pair or rival step that fitted backlash and kept something counts as having taken "
+                     "it (_compliant_took). Reruns on 05dec7d (session 67, this machine) of 23 results that did not "
+                     "take it: popup nominal seed 722 and MuJoCo nominal seed 725 (20), popup disturbance 723-000, "
+                     "popup singles 724 actuator_saturation-000 and 728 sensor_delay-000, all bit-identical "
+                     "(equivalence.py; fam_rr67a_05dec7d)",
+                     PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
+                              "or rival step that kept something")),
 }
 
 

@@ -742,6 +742,33 @@ def test_the_dither_path_test_flags_every_result_a_one_reading_play_could_change
     assert took({"truth": truth, "json": {"rounds": [], "notes": [note]}})
 
 
+def test_the_compliant_path_test_flags_every_result_that_fitted_compliant_flanks():
+    """The PathTest of the compliant flanks' torque reading (version 032f6f95c69f's
+    successor): a result took the changed path where any fit of backlash's variant
+    "compliant flanks" left its name (a suspect's message or variant, a note, the history),
+    or a pair or rival step fitted backlash and kept something; nothing else reads it."""
+    took = bench._compliant_took
+    truth = _backlash_row([], [])["truth"]
+
+    def sus(effect, message="", variant="", significant=False):
+        return {"truth": truth, "json": {"rounds": [{"suspects": [{"effect": effect, "significant": significant, "message": message,
+                                                                  "variant": variant}]}], "notes": []}}
+
+    tried = ("variant fitted link-side inertia preferred (score 145371.5 vs 141208.7; BIC gain over it 1652.8); variant compliant "
+             "flanks not preferred (score -2191.9 vs 145371.5; BIC gain over it -2531.2)")
+    assert took(sus("backlash", tried))  # tried and not preferred: its score came from the changed law
+    assert took(sus("backlash", "", "fitted link-side inertia + compliant flanks", significant=True))
+    assert not took(sus("backlash", "variant fitted link-side inertia preferred (score 145371.5 vs 141208.7)"))
+    assert not took(sus("payload_mass", "variant centre-of-mass offset not preferred"))
+    assert not took({"truth": truth, "json": {"rounds": [], "notes": []}})
+    kept = "a pair with backlash (...) and one of sensor_delay, torsion, each fitted jointly with it from its seeds: sensor_delay kept (BIC gain 306)"
+    assert took({"truth": truth, "json": {"rounds": [], "notes": [kept]}})
+    quiet = ("a pair with wrinkling (...) and one of payload_mass, backlash, each fitted with it from its seeds: no candidate "
+             "significant; the model stands")
+    assert not took({"truth": truth, "json": {"rounds": [], "notes": [quiet]}})
+    assert took({"truth": truth, "json": {"rounds": [], "notes": [], "history": [{"effects": ["backlash"], "variant": "compliant flanks"}]}})
+
+
 def test_the_first_pair_path_test_flags_every_result_that_reached_the_first_round_pair_step():
     """The PathTest of the first-round pair step (version 9e21507cd957's successor): the step
     runs where one effect is in the model, a later round finds nothing significant, and
