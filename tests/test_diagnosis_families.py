@@ -1516,8 +1516,8 @@ def test_a_compliant_gear_is_diagnosed_as_compliant_flanks(tmp_path):
     their combination with the inertia, started from each variant's own fit. Measured
     (session 21, the output inertia on the play coordinate): gap 31.1 mrad (truth 30), k_c
     2.85e4 (2e4), J_out 0.051 (0.1), pinned only within a factor 2. Session 67, the gear
-    built as a two-mass joint: gap 29.65 mrad, k_c 1.91e4, J_out 0.0953, each within 5 %
-    (210 s); held to 25 %."""
+    built as a two-mass joint and both flank laws reading the torque at the link (05dec7d):
+    gap 29.65 mrad, k_c 1.93e4, J_out 0.0974, each within 4 % (236 s); held to 25 %."""
     run = _soft_gear_run(tmp_path)
     d = popup.diagnose(run.model(), run, effects=["backlash"], threads=1)
     s = d.suspects[0]
