@@ -475,8 +475,10 @@ class RunSpec:
         d = asdict(self)
         if not d["member_sigma"]:
             del d["member_sigma"]  # only pairs have one (truths made before session 65 have none)
-        if self.engine == "mujoco" and "backlash" in self.effects and not any(self.effects["backlash"].get("held", [])):
-            d["gear"] = GEAR_MODEL
+        bl = self.effects.get("backlash") or {}
+        held = list(bl.get("held", [])) + [0.0] * 3
+        if self.engine == "mujoco" and any(float(g) > 0 and not held[i] for i, g in enumerate(bl.get("gap", []))):
+            d["gear"] = GEAR_MODEL  # some joint's link side is free in its gap: the two-mass gear
         d["hidden"] = sorted(self.effects)
         d["kind"] = ("nominal" if self.family == "nominal" else "disturbance" if self.family == "disturbance"
                      else "pair" if self.family == "pairs" else "effect")
@@ -677,11 +679,13 @@ SERVO_ZETA = 1.0
 #: the tip by ~0.02 noise sigma at 40 N·m (it is not the effect under test)
 BACKLASH_K = 1e7
 BACKLASH_D = 1000.0
-#: inertia of the gear's link side on the play coordinate [kg·m²] (armature of the play
-#: dof, on top of the rotor's full armature): without it the play joint sees only the 3 cm
-#: root piece (~1e-5 kg·m²) at high frequency and the gear contact would be far too stiff
-#: for any explicit step (here ω ≈ 1e4 rad/s); in contact it does nothing. With a gap of
-#: 1e-7 rad the arm differs from the nominal one by 0.2 noise sigma (the gear compliance)
+#: the gear's output inertia J_out [kg·m²], armature of the link-side dof (its own angle,
+#: beside the rotor's full armature): without it the contact sees only the 3 cm root piece
+#: (~1e-5 kg·m²) at high frequency and would be far too stiff for any explicit step (here
+#: ω ≈ 1e4 rad/s). It turns with the link, so in contact the gear drives it too; the torque
+#: channel, read at the link, leaves its J_out·q̈ out. (Until session 67 it sat on the play
+#: coordinate, where in contact it did nothing; with a gap of 1e-7 rad that arm differed from
+#: the nominal one by 0.2 noise sigma, the gear compliance.)
 BACKLASH_OUT = 0.1
 #: how a MuJoCo run's gear with play is built (the truth's ``gear``; runs made before
 #: session 67 have none: their output inertia sat on the play coordinate; at c9b456d the
