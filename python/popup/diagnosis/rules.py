@@ -4,7 +4,7 @@ of each effect, the structures and steps its candidates are tried at, and the fl
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Dict, List, Mapping
+from typing import Any, Callable, Dict, List, Mapping, Tuple
 
 from .. import estimate as est
 from ..problem import ENCODER_LEVEL, ReplayProblem
@@ -183,7 +183,8 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
                  # law of Modelica and Simscape), which also carries the gear's own compliance
                  # while it pushes; run at the step of its stiffest plausible flank (the
                  # check needs a gap on every joint: a joint without one has no flank, and
-                 # its stiffness would not be in the linearisation at all)
+                 # its stiffness would not be in the linearisation at all); a joint whose
+                 # play vanishes in its fit is given the rigid flanks back (RIGID_WHERE_ZERO)
                  {"name": "compliant flanks", "extra": ["contact_k", "contact_c"],
                   "structure": {"contact_k": [1e4, 1e4, 1e4], "contact_c": [5.0, 5.0, 5.0]},
                   "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [est.BOUNDS[("backlash", "contact_c")][1]] * 3,
@@ -199,6 +200,20 @@ the base ones (from the base fit and the variant's ``seeds``), or another ``stru
 or not, and so is a refinement marked ``always`` (one whose base law cannot stand in for
 it, so a base below the threshold says nothing about it); unlike an alternative, it is
 combined with the other variants."""
+
+
+RIGID_WHERE_ZERO: Dict[str, Tuple[str, Tuple[str, ...]]] = {"backlash": ("contact_k", ("contact_k", "contact_c"))}
+"""Effects whose law on an entry (joint) is its rigid one where a parameter is 0, and the
+parameters then not fitted there: backlash's flanks are rigid where ``contact_k`` is 0, and
+neither their stiffness (fitted as its logarithm, which 0 has none of) nor their damping is
+fitted on that joint; a fit started there, and every refit of it, keeps it rigid. Where a
+variant's fit leaves a joint not rigid but without play (below :data:`PLAY_READINGS`
+encoder readings of :data:`PLAY_PARAMS`), it is refitted with that joint rigid and kept if
+the likelihood prefers it (:func:`candidate._rigid_where_no_play`): a joint without play,
+given compliant flanks, is a spring to a link-side inertia it never had (MuJoCo's soft gear
+on joint 2: joints 1 and 3 ended with vanishing gaps on flanks at the 1e5 N·m/rad bound and
+a link side at its 1 kg·m² bound, 41 noise units where the truth replays at 0.17;
+benchmarks/README.md, session 68)."""
 
 
 Progress = Callable[[Dict[str, Any]], None]
