@@ -717,7 +717,8 @@ def _first_pair_took(row: Dict[str, Any]) -> bool:
 def _compliant_took(row: Dict[str, Any]) -> bool:
     """Whether the classification of ``row`` may depend on backlash's compliant flanks (the
     change after version ``032f6f95c69f``: their torque channel reads the gear's torque less
-    the output inertia's own J_out·q̈, where it read the gear's). Only a model with
+    the output inertia's own J_out·q̈, where it read the gear's; after ``a11dfdf18670``:
+    their damping's bound, and a joint whose play vanishes refitted rigid). Only a model with
     ``contact_k`` > 0 computes anything else, and the diagnosis builds one only as backlash's
     variant "compliant flanks" (tried where backlash is significant or its base law beats the
     nominal model by the threshold), whose every fit leaves its name in that round's suspect
@@ -815,6 +816,20 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "take it: popup nominal seed 722 and MuJoCo nominal seed 725 (20), popup disturbance 723-000, "
                      "popup singles 724 actuator_saturation-000 and 728 sensor_delay-000, all bit-identical "
                      "(equivalence.py; fam_rr67a_05dec7d)",
+                     PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
+                              "or rival step that kept something")),
+    "a11dfdf18670": ("83272b92ff75",
+                     "e588665: backlash's compliant flanks damped up to 100 N·m·s/rad (estimate.BOUNDS, was 50; the "
+                     "variant's step from its stiffest flank at that bound); a compliant fit that leaves a joint's "
+                     "play below half a reading is refitted with that joint's flanks rigid and kept where BIC "
+                     "prefers it (candidate._rigid_where_no_play, rules.RIGID_WHERE_ZERO: a joint whose contact_k "
+                     "is 0 fits neither contact_k nor contact_c)",
+                     "the bound is only read by fits of contact_c, and contact_c is fitted only in the variant "
+                     "'compliant flanks' and fits started from it (its combinations, refits of a model that kept "
+                     "it), each leaving the variant's name in the JSON; contact_k is 0 in a backlash fit's start "
+                     "only where the new step puts it; a pair or rival step that fitted backlash and kept something "
+                     "counts as having taken it (_compliant_took). Reruns on e588665 (session 68, this machine): "
+                     "see benchmarks/README.md, session 68",
                      PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
                               "or rival step that kept something")),
 }
