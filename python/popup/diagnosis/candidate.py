@@ -521,8 +521,10 @@ def _rigid_where_no_play(prob: ReplayProblem, name: str, best: _Fitted, max_iter
     if rigid is None or key is None:
         return best
     p = est.params_dict(name, best.out.flat)
-    play = np.asarray(p[key], dtype=float)
-    off = (np.asarray(p[rigid[0]], dtype=float) != 0.0) & (play < PLAY_READINGS * np.asarray(prob.encoder_width, dtype=float))
+    soft = np.asarray(p[rigid[0]], dtype=float) != 0.0
+    if not soft.any():
+        return best
+    off = soft & (np.asarray(p[key], dtype=float) < PLAY_READINGS * np.asarray(prob.encoder_width, dtype=float))
     if not off.any() or off.all():
         return best
     fitted = sorted({q.name for q, _ in best.free if q.effect == name})
