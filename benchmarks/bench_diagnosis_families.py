@@ -571,6 +571,12 @@ OUTCOME_EQUIVALENT: Dict[str, Tuple[str, str, str]] = {
                      "library'); classify reads none of it",
                      "8 of 8 reruns bit-identical (session 58, same machine): popup disturbances of seed 674 "
                      "and MuJoCo disturbances of seed 675 on 060de16 (fam_pde674_060de16, fam_mde675_060de16)"),
+    "83272b92ff75": ("1bfe2b550767",
+                     "ef4fb86: candidate._rigid_where_no_play returns before reading the problem's encoder width "
+                     "where no joint has flanks (a test's stand-in problem has none)",
+                     "git diff e588665 ef4fb86 on the diagnosis paths is that reordering: where no joint's "
+                     "contact_k is nonzero both return the fit as it is (the old mask was all False), elsewhere "
+                     "the same expressions in the same order"),
 }
 
 
@@ -828,8 +834,11 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "'compliant flanks' and fits started from it (its combinations, refits of a model that kept "
                      "it), each leaving the variant's name in the JSON; contact_k is 0 in a backlash fit's start "
                      "only where the new step puts it; a pair or rival step that fitted backlash and kept something "
-                     "counts as having taken it (_compliant_took). Reruns on e588665 (session 68, this machine): "
-                     "see benchmarks/README.md, session 68",
+                     "counts as having taken it (_compliant_took). Reruns on b542e79 (e588665's code; session 68, "
+                     "this machine) of 20 results that did not take it: popup nominal seed 743 and MuJoCo nominal "
+                     "seed 744, all bit-identical (equivalence.py; fam_pne743_b542e79, fam_mne744_b542e79); and of "
+                     "9 of the 12 that took it: 8 right, MuJoCo pair 730-002 cut by the time limit after round 2 "
+                     "(fam_rr68a/b/c/d_b542e79)",
                      PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
                               "or rival step that kept something")),
 }
