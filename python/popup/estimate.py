@@ -138,8 +138,8 @@ BOUNDS: Dict[Tuple[str, str], Tuple[float, float]] = {
     # the rigid flanks stand for; the damping up to critical for the stiffest flank on a
     # 0.025 kg·m² link side (ζ = 0.5 on 0.1 kg·m²). It was 50 N·m·s/rad: MuJoCo single 742
     # backlash-000 (0.1 kg·m², ζ = 0.5: 68.7) was fitted at 48 and left 14.2 noise units where
-    # its truth replays at 1.67 (benchmarks/README.md, session 68); a larger bound costs a
-    # proportionally smaller step (the overdamped mode c/J of the check's 0.01 kg·m²)
+    # its truth replays at 1.67 (benchmarks/README.md, session 68); the variant's step is set
+    # at a lower damping (diagnosis.rules.FLANK_CHECK_DAMPING), where the step is largest
     ("backlash", "contact_k"): (1e3, 1e5),
     ("backlash", "contact_c"): (0.0, 100.0),
     # the friction sign's width: below ~5e-4 rad/s it is narrower than the velocity noise of
