@@ -724,7 +724,9 @@ def _compliant_took(row: Dict[str, Any]) -> bool:
     """Whether the classification of ``row`` may depend on backlash's compliant flanks (the
     change after version ``032f6f95c69f``: their torque channel reads the gear's torque less
     the output inertia's own J_out·q̈, where it read the gear's; after ``a11dfdf18670``:
-    their damping's bound, and a joint whose play vanishes refitted rigid). Only a model with
+    their damping's bound, and a joint whose play vanishes refitted rigid; after
+    ``1bfe2b550767``: the variant's step, from its stiffest flank damped at 50 N·m·s/rad
+    where it was damped at the bound's 100). Only a model with
     ``contact_k`` > 0 computes anything else, and the diagnosis builds one only as backlash's
     variant "compliant flanks" (tried where backlash is significant or its base law beats the
     nominal model by the threshold), whose every fit leaves its name in that round's suspect
