@@ -843,6 +843,18 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "(fam_rr68a/b/c/d_b542e79)",
                      PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
                               "or rival step that kept something")),
+    "1bfe2b550767": ("483463088413",
+                     "9d09c4e: backlash's compliant flanks run at the step of their stiffest flank damped at "
+                     "rules.FLANK_CHECK_DAMPING (50 N·m·s/rad), where it was damped at the bound's 100: a 2.8 x larger "
+                     "step; a damping that step cannot carry fails its rollout",
+                     "the step is read only by the variant 'compliant flanks' and its combinations (the variant's "
+                     "'stiffest'), each leaving the variant's name in the JSON; a pair or rival step that fitted "
+                     "backlash and kept something counts as having taken it (_compliant_took). Reruns on 9d09c4e "
+                     "(session 69, this machine) of 20 results that did not take it: popup nominal seed 743 and "
+                     "MuJoCo nominal seed 744, all bit-identical (equivalence.py; fam_pnf743_9d09c4e, "
+                     "fam_mnf744_9d09c4e); and of the 10 that took it (fam_rr69a..e_9d09c4e)",
+                     PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
+                              "or rival step that kept something")),
 }
 
 
