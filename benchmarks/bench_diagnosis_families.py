@@ -852,7 +852,9 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "backlash and kept something counts as having taken it (_compliant_took). Reruns on 9d09c4e "
                      "(session 69, this machine) of 20 results that did not take it: popup nominal seed 743 and "
                      "MuJoCo nominal seed 744, all bit-identical (equivalence.py; fam_pnf743_9d09c4e, "
-                     "fam_mnf744_9d09c4e); and of the 10 that took it (fam_rr69a..e_9d09c4e)",
+                     "fam_mnf744_9d09c4e); and of the 10 that took it, all right by the counts (MuJoCo pair 730-002, a "
+                     "miss on 1bfe2b550767, right again), one worse: MuJoCo 742 backlash-000, 0.444 noise units before, "
+                     "18.1 after backlash and a spurious payload, cut in round 3 (fam_rr69a/b/c/d/e_9d09c4e)",
                      PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
                               "or rival step that kept something")),
 }
