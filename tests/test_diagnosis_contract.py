@@ -577,6 +577,55 @@ def test_a_fit_never_ends_worse_than_the_start_it_was_given(nominal, tmp_path):
     assert np.all(out.x < 2e-4), out.x
 
 
+@pytest.mark.parametrize("b", [[0.3, 0.3, 0.3], [0.1, 0.3, 0.6]])
+def test_a_tied_fit_fits_one_value_for_its_group(nominal, tmp_path, b):
+    """``tie``: the entries of a group are one unknown (one Jacobian column), started from
+    their mean; on a run whose joints share the value it is found, and where they do not, the
+    tied fit is worse than the fit per entry, which finds each."""
+    from popup.problem import ReplayProblem
+
+    t, q = popup.synth.lab_trajectory(4.0, rate=250.0, seed=41)
+    truth = nominal.with_effect("joint_friction", tau_c=[0.0, 0.0, 0.0], b=b)
+    run = popup.synth.measured_run(truth, t, q, tmp_path, seed=41)
+    prob = ReplayProblem(nominal, run)
+    free = est.free_params("joint_friction", ["b"])
+    flat = nominal.effects_flat
+    x0 = np.array([0.05, 0.1, 0.2])
+    tied = est.fit(prob, flat, free, x0, 15, tie=[[0, 1, 2]])
+    each = est.fit(prob, flat, free, x0, 15)
+    assert tied.J.shape[1] == 1 and each.J.shape[1] == 3
+    assert tied.x[0] == tied.x[1] == tied.x[2]
+    np.testing.assert_allclose(each.x, b, rtol=0.03, atol=0.01)
+    if len(set(b)) == 1:
+        assert abs(tied.x[0] - b[0]) < 0.05 * b[0], tied.x
+    else:
+        assert est._nll(prob, tied.z, prob.train) > est._nll(prob, each.z, prob.train) + 100.0
+
+
+def test_tie_groups_name_a_bad_group():
+    assert est.tie_groups(4, [[1, 3]]) == [[0], [1, 3], [2]]
+    assert est.tie_groups(3, None) == [[0], [1], [2]]
+    for bad, what in (([[0, 3]], "out of range"), ([[0, 1], [1, 2]], "in two groups")):
+        with pytest.raises(popup.PopupError, match=what) as e:
+            est.tie_groups(3, bad)
+        assert isinstance(e.value, ValueError)
+
+
+def test_the_compliant_flanks_share_their_law_for_one_more_start():
+    """The compliant flanks (alone and combined with the fitted link side) are also fitted
+    with one flank law and link side on every joint (:func:`candidate._shared_groups`), the
+    gaps per joint."""
+    flanks = dgc._variant_named("backlash", "compliant flanks")
+    both = dgc._variant_named("backlash", "fitted link-side inertia + compliant flanks")
+    assert set(flanks["shared"]) == set(both["shared"]) == {"contact_k", "contact_c", "inertia"}
+    free = est.free_params("backlash", ["gap", "inertia", "contact_k", "contact_c"])
+    groups = dgc._shared_groups(free, "backlash", both["shared"])
+    assert sorted(free[g[0]][0].name for g in groups) == ["contact_c", "contact_k", "inertia"]
+    assert all(len(g) == 3 and len({free[j][0].name for j in g}) == 1 for g in groups)
+    assert dgc._untied(free, "backlash", groups) == [j for j, (p, _) in enumerate(free) if p.name == "gap"]
+    assert dgc._shared_groups(free[:4], "backlash", both["shared"]) == []  # one inertia entry: nothing to share
+
+
 def test_a_candidate_refitted_with_the_added_effects_applies_them_as_refitted(nominal, tmp_path):
     """From round 2 a candidate is refitted jointly with the effects already added; its
     ``error_after`` is that joint fit's, so ``Suspect.apply`` sets the added effects at their

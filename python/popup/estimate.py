@@ -233,17 +233,25 @@ def fit(
     *,
     scale: Optional[np.ndarray] = None,
     mask: Optional[np.ndarray] = None,
+    tie: Optional[Sequence[Sequence[int]]] = None,
 ) -> FitOutcome:
     """Maximum-likelihood fit of the ``free`` entries (module docs) on the samples of
-    ``mask`` (default: the problem's training samples)."""
+    ``mask`` (default: the problem's training samples). ``tie``: groups of positions in
+    ``free`` (entries of one parameter) fitted as one value, started from their mean
+    (:func:`tied`); the outcome's ``x`` has every entry, its ``J`` one column per group."""
     from scipy.optimize import least_squares
 
     train = prob.train if mask is None else mask
+    groups = tie_groups(len(free), tie)
+    rep = np.empty(len(free), dtype=int)
+    for u, g in enumerate(groups):
+        rep[g] = u
+    free_all, free = free, [free[g[0]] for g in groups]
     lg = np.array([_is_log(p) for p, _ in free], dtype=bool)
     lu = np.array([_is_log_gap(p) for p, _ in free], dtype=bool)
     lo_v = np.array([p.lower for p, _ in free])
     hi_v = np.array([p.upper for p, _ in free])
-    sc_v = np.array([PARAM_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, dtype=float)
+    sc_v = np.array([PARAM_SCALE.get((p.effect, p.name), 1.0) for p, _ in free]) if scale is None else np.asarray(scale, dtype=float)[[g[0] for g in groups]]
     # the solver's variables: ln v for LOG_PARAMS entries, ln(upper − v) for LOG_GAP_PARAMS
     # entries (scale: one e-fold; the solver's lower bound there is v = upper), else v
     gap_min = np.where(lu, LOG_GAP_MIN * np.where(lu & np.isfinite(hi_v - lo_v), hi_v - lo_v, 1.0), 1.0)
@@ -262,20 +270,20 @@ def fit(
     hi = np.where(lu, np.log(np.where(lu, np.maximum(hi_v - lo_v, gap_min), 1.0)), to_s(hi_v))
     sc = np.where(lg | lu, 1.0, sc_v)
 
-    idx = np.array([p.offset + i for p, i in free], dtype=int)
+    idx = np.array([p.offset + i for p, i in free_all], dtype=int)
     # a start on a bound stalls the trust-region-reflective steps (their scaling is the
     # distance to the bound): start a fraction of the typical scale inside
     fin_lo = np.where(np.isfinite(lo), lo, -1e300)
     fin_hi = np.where(np.isfinite(hi), hi, 1e300)
     nudge = np.minimum(_NUDGE * sc, 0.5 * (fin_hi - fin_lo))
-    x_given = to_s(np.asarray(x0, dtype=float))
+    x_given = to_s(tied(free_all, x0, groups)[[g[0] for g in groups]])
     x0 = np.clip(x_given, fin_lo + nudge, fin_hi - nudge)
     cache: Dict[bytes, np.ndarray] = {}
     n0 = prob.nfev
 
     def flat_of(x: np.ndarray) -> np.ndarray:
         f = np.array(base_flat, dtype=float)
-        f[idx] = to_v(x)
+        f[idx] = to_v(x)[rep]
         return f
 
     def eval_batch(xs: List[np.ndarray]) -> List[np.ndarray]:
@@ -345,7 +353,44 @@ def fit(
     dsdv = np.where(lg, 1.0 / np.where(lg, v, 1.0), np.where(lu, -1.0 / np.maximum(np.where(lu, hi_v, 0.0) - v, gap_min), 1.0))
     J = _jac(x, w) * dsdv[None, :]
     row_t = np.repeat(np.asarray(prob.time, dtype=float)[train], z.shape[1])
-    return FitOutcome(x=v, flat=flat_of(x), z=z, J=J, weights=w, nfev=prob.nfev - n0, r=vec(z, w), row_t=row_t)
+    return FitOutcome(x=v[rep], flat=flat_of(x), z=z, J=J, weights=w, nfev=prob.nfev - n0, r=vec(z, w), row_t=row_t)
+
+
+def tied(free: List[Tuple[fx.EffectParam, int]], x: np.ndarray, groups: Sequence[Sequence[int]]) -> np.ndarray:
+    """``x`` (values of ``free``) with every entry of a group of two or more at the group's
+    mean (geometric for a parameter fitted as its logarithm)."""
+    out = np.array(x, dtype=float)
+    for g in groups:
+        if len(g) > 1:
+            g = list(g)
+            out[g] = math.exp(float(np.mean(np.log(np.clip(out[g], 1e-300, 1e300))))) if _is_log(free[g[0]][0]) else float(np.mean(out[g]))
+    return out
+
+
+def tie_groups(n: int, tie: Optional[Sequence[Sequence[int]]]) -> List[List[int]]:
+    """The groups of positions ``0..n-1`` fitted as one value: each group of ``tie`` (in the
+    order of its first position), every other position alone; an InputError where a position
+    is out of range or in two groups."""
+    from .exceptions import InputError
+
+    owner: Dict[int, int] = {}
+    for k, g in enumerate(tie or []):
+        for j in g:
+            if not 0 <= int(j) < n or int(j) in owner:
+                raise InputError(f"tie: position {j} of group {k} is {'out of range 0..' + str(n - 1) if not 0 <= int(j) < n else 'in two groups'}")
+            owner[int(j)] = k
+    out: List[List[int]] = []
+    seen: Dict[int, int] = {}
+    for j in range(n):
+        k = owner.get(j)
+        if k is None:
+            out.append([j])
+        elif k in seen:
+            out[seen[k]].append(j)
+        else:
+            seen[k] = len(out)
+            out.append([j])
+    return out
 
 
 def _nll(prob: ReplayProblem, z: np.ndarray, train: np.ndarray) -> float:

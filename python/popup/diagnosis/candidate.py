@@ -329,13 +329,16 @@ class _Fitted:
 def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str, Any]], only: Optional[Sequence[str]], start: Optional[Dict[str, List[float]]],
                    extra_seeds: Optional[List[Dict[str, Any]]], max_iter: int, variant: str = "",
                    also: Optional[List[Tuple[fx.EffectParam, int]]] = None, stiffest: Optional[Dict[str, Any]] = None,
-                   dt: Optional[float] = None, seeds: bool = True, base: Optional[ReplayProblem] = None, k_extra: int = 0) -> Tuple[_Fitted, str]:
+                   dt: Optional[float] = None, seeds: bool = True, base: Optional[ReplayProblem] = None, k_extra: int = 0,
+                   shared: Optional[Sequence[str]] = None) -> Tuple[_Fitted, str]:
     """Fit one candidate (``structure``, the names ``only`` or every fitted one) from
     ``start`` and the effect's seeds (``seeds=False``: from ``start`` alone), with the
     entries of ``also`` refitted jointly; ``dt``: the step to use (default: from the
     structure's stability limit at ``stiffest``); ``base``: the problem (same run and
     model, another unseen motion) whose nominal replay the fit is scored against (default
-    ``prob``), with ``k_extra`` more parameters counted than those fitted here."""
+    ``prob``), with ``k_extra`` more parameters counted than those fitted here; ``shared``:
+    parameters also fitted as one value on every entry, for one more start (the variant's
+    ``shared``)."""
     model = prob.model
     m = model
     note = ""
@@ -384,27 +387,16 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         # over a long run, which makes the full-run objective a needle around the truth:
         # fit on a short horizon first (a wide basin), then on horizons doubled in turn,
         # each from the last optimum (continuation), and offer the result as one more start
-        t0, t1 = float(p.time[0]), float(p.time[-1])
-        h = max(SHORT_HORIZON_S, 0.2 * (t1 - t0))
-        ph = p.with_horizon(t0 + h)
-        if ph is not p:
-            xh, _ = est.best_start(ph, free_all, flat, cands)
-            unresolved: Optional[List[int]] = None
-            if name in COORDINATE_SEEDS:
-                xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh)
-            xh = est.fit(ph, flat, free_all, xh, iters).x
-            while 2.0 * h < t1 - t0:
-                h *= 2.0
-                ph = p.with_horizon(t0 + h)
-                if unresolved:
-                    # a joint whose gap the shorter horizon could not tell (it had not
-                    # crossed it yet) is swept again where it does: the local fit alone
-                    # cannot leave the needle it was left in
-                    xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh, unresolved)
-                xh = est.fit(ph, flat, free_all, xh, iters, mask=p.train[p.time <= t0 + h]).x
-            if unresolved:
-                xh, _ = _coordinate_seeds(p, name, free_all, flat, xh, unresolved)
+        tie = _shared_groups(free_all, name, shared)
+        starts = list(cands)
+        xh = _continued(p, name, free_all, flat, starts, iters)
+        if xh is not None:
             cands.append(xh)
+            if tie:
+                # the same with the ``shared`` parameters one value on every entry (half the
+                # unknowns): per entry, gaps and flanks trade off and the fit ends in a basin
+                # of its own; the shared optimum is one more start for the per-entry fit
+                cands.append(_continued(p, name, free_all, flat, starts, iters, tie))
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
     z_null = None
@@ -415,6 +407,53 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         if not np.array_equal(nf, nb.model.effects_flat):
             z_null = nb.residuals(nb.simulate(nf))[0]
     return _Fitted(name, variant, p, z_base, free_all, out, k=len(free) + k_extra, z_null=z_null), note
+
+
+def _shared_groups(free: List[Tuple[fx.EffectParam, int]], name: str, shared: Optional[Sequence[str]]) -> List[List[int]]:
+    """Positions in ``free`` of each parameter of ``name`` in ``shared`` (one group per
+    parameter fitted on two or more entries), for :func:`estimate.fit`'s ``tie``."""
+    out = [[j for j, (q, _) in enumerate(free) if q.effect == name and q.name == n] for n in (shared or [])]
+    return [g for g in out if len(g) > 1]
+
+
+def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, cands: List[np.ndarray],
+               iters: int, tie: Optional[List[List[int]]] = None) -> Optional[np.ndarray]:
+    """The best of ``cands`` on a short horizon, fitted there and on horizons doubled in
+    turn, each from the last optimum (``tie``: with those groups fitted as one value);
+    ``None`` where the run is no longer than the short horizon."""
+    t0, t1 = float(p.time[0]), float(p.time[-1])
+    h = max(SHORT_HORIZON_S, 0.2 * (t1 - t0))
+    ph = p.with_horizon(t0 + h)
+    if ph is p:
+        return None
+    if tie:
+        cands = [est.tied(free_all, c, tie) for c in cands]
+    xh, _ = est.best_start(ph, free_all, flat, cands)
+    unresolved: Optional[List[int]] = None
+    if name in COORDINATE_SEEDS:
+        xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh, _untied(free_all, name, tie))
+    xh = est.fit(ph, flat, free_all, xh, iters, tie=tie).x
+    while 2.0 * h < t1 - t0:
+        h *= 2.0
+        ph = p.with_horizon(t0 + h)
+        if unresolved:
+            # a joint whose gap the shorter horizon could not tell (it had not
+            # crossed it yet) is swept again where it does: the local fit alone
+            # cannot leave the needle it was left in
+            xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh, unresolved)
+        xh = est.fit(ph, flat, free_all, xh, iters, mask=p.train[p.time <= t0 + h], tie=tie).x
+    if unresolved:
+        xh, _ = _coordinate_seeds(p, name, free_all, flat, xh, unresolved)
+    return xh
+
+
+def _untied(free: List[Tuple[fx.EffectParam, int]], name: str, tie: Optional[List[List[int]]]) -> Optional[List[int]]:
+    """Positions of ``name``'s entries in ``free`` outside every group of ``tie`` (``None``:
+    every entry, where nothing is tied): a sweep entry by entry would untie a group."""
+    if not tie:
+        return None
+    tied = {j for g in tie for j in g}
+    return [j for j, (q, _) in enumerate(free) if q.effect == name and j not in tied]
 
 
 def _coordinate_seeds(prob: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray,
@@ -490,7 +529,8 @@ def try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int
                 start = {k: base_params[k] for k in stiff}
             if var.get("stiffest"):
                 stiff = dict(var["stiffest"])
-            vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also, stiffest=stiff)
+            vf, _ = _fit_candidate(prob, name, struct or None, only, start, var.get("seeds"), max_iter, variant=str(var["name"]), also=also, stiffest=stiff,
+                                   shared=var.get("shared"))
         except Exception as e:  # noqa: BLE001
             notes.append(f"variant {var['name']} not tested: {type(e).__name__}: {e}")
             continue
@@ -555,6 +595,8 @@ def _combined(a: Mapping[str, Any], b: Mapping[str, Any]) -> Optional[Dict[str, 
     out: Dict[str, Any] = {"name": f"{a['name']} + {b['name']}", "structure": {**sa, **sb}, "extra": extra}
     if a.get("stiffest") or b.get("stiffest"):
         out["stiffest"] = {**dict(a.get("stiffest") or {}), **dict(b.get("stiffest") or {})}
+    if a.get("shared") or b.get("shared"):
+        out["shared"] = sorted(set(a.get("shared") or []) | set(b.get("shared") or []))
     return out
 
 
@@ -620,7 +662,7 @@ def _try_combined(prob: ReplayProblem, name: str, best: _Fitted, best_var: Mappi
             from_var = [{k: v for k, v in vp.items() if k not in own_extra}, vp]  # with best's extras, and as fitted
             cf, _ = _fit_candidate(prob, name, struct, only, start, from_var + list(var.get("seeds") or []), max_iter,
                                    variant=cv["name"], also=also, stiffest=stiff,
-                                   seeds=bool(set(var.get("extra") or []) - own_extra))
+                                   seeds=bool(set(var.get("extra") or []) - own_extra), shared=cv.get("shared"))
         except Exception as e:  # noqa: BLE001
             notes.append(f"variant {cv['name']} not tested: {type(e).__name__}: {e}")
             continue

@@ -150,7 +150,6 @@ STIFFEST: Dict[str, Dict[str, Any]] = {
 }
 
 
-
 FLANK_CHECK_DAMPING = 50.0
 """Damping [N·m·s/rad] of the stiffest compliant flank (``contact_k`` at its upper bound)
 whose stability limit sets the step of backlash's compliant-flanks variant: ζ ≈ 0.8 on the
@@ -202,7 +201,11 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
                   "structure": {"contact_k": [1e4, 1e4, 1e4], "contact_c": [5.0, 5.0, 5.0]},
                   "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [FLANK_CHECK_DAMPING] * 3,
                                "gap": [1e-3] * 3},
-                  "seeds": [{"contact_k": 3e3, "contact_c": 3.0}, {"contact_k": 3e4, "contact_c": 10.0}, {"contact_k": 1e5, "contact_c": 30.0}]}],
+                  "seeds": [{"contact_k": 3e3, "contact_c": 3.0}, {"contact_k": 3e4, "contact_c": 10.0}, {"contact_k": 1e5, "contact_c": 30.0}],
+                  # one flank law (and link side) on every joint with play, fitted with the gaps
+                  # for one more start: per joint, gaps and flanks trade off (MuJoCo's soft gear
+                  # 760: flanks 4-7 % off the truth's gaps replay at 8.5 noise units, the truth at 1.0)
+                  "shared": ["contact_k", "contact_c", "inertia"]}],
     "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
                 {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
 }
@@ -212,7 +215,8 @@ the base ones (from the base fit and the variant's ``seeds``), or another ``stru
 ``alternative`` (another law for the same effect) is tried whether the base is significant
 or not, and so is a refinement marked ``always`` (one whose base law cannot stand in for
 it, so a base below the threshold says nothing about it); unlike an alternative, it is
-combined with the other variants."""
+combined with the other variants. ``shared``: parameters also fitted as one value on every
+entry (with the others per entry) for one more start of the fit per entry."""
 
 
 RIGID_WHERE_ZERO: Dict[str, Tuple[str, Tuple[str, ...]]] = {"backlash": ("contact_k", ("contact_k", "contact_c"))}
