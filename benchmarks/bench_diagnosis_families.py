@@ -857,6 +857,18 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "18.1 after backlash and a spurious payload, cut in round 3 (fam_rr69a/b/c/d/e_9d09c4e)",
                      PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
                               "or rival step that kept something")),
+    "483463088413": ("5d323d9b573b",
+                     "0522f58: backlash's compliant flanks (alone and combined with the fitted link side) also run "
+                     "their short-horizon continuation with contact_k, contact_c and inertia one value on every joint "
+                     "(estimate.fit's tie), one more start for the fit per joint; estimate.fit with tie=None as before",
+                     "the shared start is built only in fits of a variant with 'shared', the variant 'compliant "
+                     "flanks' and its combinations, each leaving the variant's name in the JSON; estimate.fit "
+                     "without a tie computes what it did (the same arrays in the same order); a pair or rival step "
+                     "that fitted backlash and kept something counts as having taken it (_compliant_took). Reruns on "
+                     "0522f58 (session 71, this machine) of the 20 nominal runs of seeds 774 and 776: "
+                     "EQUIVALENCE_PENDING",
+                     PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
+                              "or rival step that kept something")),
 }
 
 
