@@ -867,7 +867,8 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "that fitted backlash and kept something counts as having taken it (_compliant_took). Reruns on "
                      "0522f58 (session 71, this machine) of the 20 nominal runs of seeds 774 and 776 (popup, MuJoCo), "
                      "made and first diagnosed on 116f0b4: all bit-identical (equivalence.py; fam_rr71a_0522f58, "
-                     "fam_rr71f_0522f58)",
+                     "fam_rr71f_0522f58); and of 11 of the 22 that took it, all right by the counts, MuJoCo 742 "
+                     "backlash-000 right with nothing else added (fam_rr71b/g/j/k/l/m_0522f58)",
                      PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
                               "or rival step that kept something")),
 }
