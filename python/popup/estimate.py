@@ -382,13 +382,13 @@ def tie_groups(n: int, tie: Optional[Sequence[Sequence[int]]]) -> List[List[int]
     out: List[List[int]] = []
     seen: Dict[int, int] = {}
     for j in range(n):
-        k = owner.get(j)
-        if k is None:
+        grp = owner.get(j)
+        if grp is None:
             out.append([j])
-        elif k in seen:
-            out[seen[k]].append(j)
+        elif grp in seen:
+            out[seen[grp]].append(j)
         else:
-            seen[k] = len(out)
+            seen[grp] = len(out)
             out.append([j])
     return out
 

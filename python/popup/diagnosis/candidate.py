@@ -396,7 +396,9 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
                 # the same with the ``shared`` parameters one value on every entry (half the
                 # unknowns): per entry, gaps and flanks trade off and the fit ends in a basin
                 # of its own; the shared optimum is one more start for the per-entry fit
-                cands.append(_continued(p, name, free_all, flat, starts, iters, tie))
+                xt = _continued(p, name, free_all, flat, starts, iters, tie)
+                if xt is not None:
+                    cands.append(xt)
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
     z_null = None
