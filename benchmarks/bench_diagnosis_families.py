@@ -556,6 +556,12 @@ def archive(dirs: Sequence[str], dest: str) -> int:
 #: and counts a run rerun on both once. The check is ``benchmarks/equivalence.py`` on reruns of
 #: kept runs: every number the classification reads the same, bit for bit.
 OUTCOME_EQUIVALENT: Dict[str, Tuple[str, str, str]] = {
+    "af72caa56565": ("5d323d9b573b",
+                     "a31021d: type-only fixes mypy asked for: estimate.tie_groups' loop variable renamed; the tied "
+                     "continuation's result appended only where it is not None, which it cannot be there (the "
+                     "untied continuation on the same horizon just returned a value)",
+                     "git diff b166825 a31021d on the diagnosis paths is those lines; the 10 popup nominal runs of "
+                     "seed 774 rerun on a31021d, bit-identical with 0522f58 (equivalence.py; fam_rr71n_a31021d)"),
     "c9e708942ac8": ("1da529465872",
                      "fee02b5: the unexplained residual's peak frequency from the whole-record periodogram, its "
                      "line share and the line wording (compare._line, conclusion._where); classify reads neither",
