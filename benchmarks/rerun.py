@@ -64,11 +64,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     out = Path(a.out)
     (out / "results").mkdir(parents=True, exist_ok=True)
     extra = [x for x in a.diagnose_args.split() if x]
-    for f in map(Path, a.results):
+    files = list(map(Path, a.results))
+    first: Dict[str, Path] = {}
+    for f in files:
+        name = f.name.split(".json")[0]
+        if name in first and first[name].resolve() != f.resolve():
+            ap.error(f"{first[name]} and {f} are both run {name!r}: one --out folder holds one result per run name; "
+                     "rerun them into separate folders")
+        first.setdefault(name, f)
+    for f in files:
         truth = _load(f)["truth"]
         path = remake(truth, out)
         cache = out / "results" / f"{path.name}.json"
         if cache.is_file():
+            kept = _load(cache).get("truth")
+            if kept is not None and kept != truth:
+                raise ValueError(f"{cache} holds another run than {f} (another seed or draw under the same name): "
+                                 "rerun it into a separate --out folder")
             print(f"{cache} exists (kept)")
             continue
         bench.diagnose_row(path, truth, cache, timeout=a.timeout, extra=extra)

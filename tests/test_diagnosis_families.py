@@ -797,7 +797,7 @@ def test_the_first_pair_path_test_flags_every_result_that_reached_the_first_roun
     assert took(again)
 
 
-def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_path, monkeypatch):
+def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_path, monkeypatch, capsys):
     """benchmarks/rerun.py makes a stored result's run again from its family's seed and index
     (the run folders are not kept), checks the truth it makes is the stored one, and writes
     the new result where --pool and equivalence.py read it."""
@@ -825,6 +825,19 @@ def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_pat
     assert rerun.main([str(stored), "--out", str(out)]) == 0
     assert seen == [(path.name, True, out / "results" / f"{path.name}.json", ["--threads", "1"])], seen
     assert rerun.main([str(stored), "--out", str(out)]) == 0 and len(seen) == 1  # a result already there is kept
+    # another seed's run of the same name is never skipped as if it were the one already there
+    other_path, other_truth = F.make_run(F.family_specs("nominal", "popup", 3, 23)[2], tmp_path / "second")
+    assert other_path.name == path.name and other_truth != truth
+    other = tmp_path / "old2" / "results" / f"{path.name}.json"
+    other.parent.mkdir(parents=True)
+    other.write_text(json.dumps({"truth": other_truth}))
+    with pytest.raises(SystemExit):
+        rerun.main([str(stored), str(other), "--out", str(tmp_path / "both")])
+    assert "are both run" in capsys.readouterr().err and len(seen) == 1
+    (out / "results" / f"{path.name}.json").write_text(json.dumps({"truth": truth}))
+    with pytest.raises(ValueError, match="holds another run than"):
+        rerun.main([str(other), "--out", str(out)])
+    assert len(seen) == 1
 
 
 def test_pairs_archived_before_member_sigma_get_it_from_the_table(tmp_path, monkeypatch):
