@@ -152,6 +152,8 @@ def classify(truth: Dict[str, Any], res: Dict[str, Any]) -> Dict[str, Any]:
     hist = [h for h in js.get("history", []) if isinstance(h, dict)]
     added: List[str] = []
     for i in range(1, len(hist)):
+        if hist[i].get("law_refined"):
+            continue  # an effect already in given a richer law: nothing added
         cur = [str(e) for e in hist[i].get("effects", []) or []]
         prev = [str(e) for e in hist[i - 1].get("effects", []) or []]
         new = [e for e in cur if e not in prev]

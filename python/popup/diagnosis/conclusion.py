@@ -165,6 +165,13 @@ def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) 
         if st.removed:
             parts.append(f"removed {st.removed} again (with {', '.join(st.effects)} refitted it explains nothing more; error {prev.error:.3g} → {st.error:.3g})")
             continue
+        if st.law_refined:
+            e, var = st.law_refined.split(": ", 1)
+            vals, ci = st.params.get(e, {}), st.ci95.get(e, {})
+            ptxt = fmt_params({k: v for k, v in vals.items() if k in ci}, ci) or fmt_params(vals, {})
+            parts.append(f"gave {e} its {var} law ({ptxt}), tried again with every effect in: the systematic error "
+                         f"{'fell' if st.error < prev.error else 'went'} from {prev.error:.3g} to {st.error:.3g} noise units")
+            continue
         new = [x for x in st.effects if x not in prev.effects] or st.effects[-1:]
         e = new[-1]
 
@@ -186,7 +193,7 @@ def conclude(h: History, max_rounds: int, prob: Optional[ReplayProblem] = None) 
         parts.append(f"{what}{reset}: {fall}" + (f"; on {ch}" if ch else ""))
     last = h.steps[-1]
     d_last = h.diagnoses[-1] if h.diagnoses and h.diagnoses[-1].problem is not None and h.diagnoses[-1].problem.model is last.model else None
-    n_added = sum(1 for st in h.steps[1:] if not st.removed)
+    n_added = sum(1 for st in h.steps[1:] if not st.removed and not st.law_refined)
     prob0 = prob if prob is not None else h.diagnoses[0].problem if h.diagnoses and h.diagnoses[0].problem is not None else None
     try:
         floor = prob0 is not None and step_at_floor(last, prob0)

@@ -352,6 +352,10 @@ class HistoryStep:
     law_reset: str = ""
     """The effect this step set back to its base law (a richer variant's extra parameters
     neutral again: they had stood in for the effect this step added), "" otherwise."""
+    law_refined: str = ""
+    """``"effect: variant"`` where this step gave an effect already in the model a richer
+    law (the variant's extra parameters fitted with every effect after the last round),
+    "" otherwise."""
     round: int = 0
     """The round of the loop this step belongs to (0: the model as given; round k's
     addition and its backward and swap steps all carry k)."""
@@ -368,6 +372,7 @@ class HistoryStep:
             "removed": self.removed,
             "swapped_in": self.swapped_in,
             "law_reset": self.law_reset,
+            "law_refined": self.law_refined,
             "unseen_compliance": [_num(x) for x in self.unseen_compliance],
             "error": _num(self.error),
             "validation_error": _num(self.validation_error),
@@ -483,7 +488,7 @@ class History:
         rows = []
         for i, s in enumerate(self.steps):
             new = " + ".join([e for e in s.effects if i and e not in self.steps[i - 1].effects] or s.effects[-1:])
-            change = (f"{s.removed} → {s.swapped_in}" if s.swapped_in else f"− {s.removed}" if s.removed
+            change = (f"{s.removed} → {s.swapped_in}" if s.swapped_in else f"− {s.removed}" if s.removed else f"{s.law_refined} law" if s.law_refined
                       else (f"+ {new} ({s.law_reset} at its base law)" if s.law_reset else f"+ {new}") if s.effects and i else "")
             row: Dict[str, Any] = {"step": i, "round": s.round, "change": change, "effects": " + ".join(s.effects) or "nominal", "error": s.error,
                                    "validation_error": s.validation_error}
@@ -560,7 +565,8 @@ class History:
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 4))
         x = np.arange(len(self.steps))
-        labels = ["nominal"] + [(f"{s.removed}→{s.swapped_in}" if s.swapped_in else f"−{s.removed}" if s.removed else f"+{s.effects[-1]}")
+        labels = ["nominal"] + [(f"{s.removed}→{s.swapped_in}" if s.swapped_in else f"−{s.removed}" if s.removed
+                                 else f"{s.law_refined}" if s.law_refined else f"+{s.effects[-1]}")
                                 for s in self.steps[1:]]
         chans = list(self.steps[0].channel_error)
         for c in chans:
