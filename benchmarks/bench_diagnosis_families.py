@@ -744,6 +744,32 @@ def _compliant_took(row: Dict[str, Any]) -> bool:
     return "compliant flanks" in json.dumps(js) or _play_took(row, lambda g, c, w: True)
 
 
+#: The effects with a law in ``VARIANTS`` that only adds parameters (no other structure, not
+#: an alternative) at c4baab4: the ones the richer-law step after the rounds can refit.
+RICHER_LAW_EFFECTS = ("joint_friction", "higher_bending_modes", "payload_mass", "backlash")
+#: A diagnosis shorter than this [s] ends well inside the families' time limit (2 700 s of
+#: the 3 000 s --timeout; 2 610 s in rerun.py) with the richer-law step's refits added.
+RICHER_LAW_SECONDS = 1500.0
+
+
+def _richer_law_took(row: Dict[str, Any]) -> bool:
+    """Whether the classification of ``row`` may depend on the richer-law step (the change
+    after version ``5d323d9b573b``, ``loop._try_richer_laws``). The step runs once, after the
+    last round found nothing significant, on a model with an effect of
+    :data:`RICHER_LAW_EFFECTS`, and changes only that effect's law: the effects of every
+    step, their rounds and the effect added first stay, and the smallest error of the
+    history can only fall, so no count (a)-(f) reads anything it changes, but for the time
+    it takes: read conservatively, a result whose final model has such an effect and that
+    ran longer than :data:`RICHER_LAW_SECONDS` (or recorded no time) took it."""
+    js = row.get("json") or {}
+    hist = [h for h in js.get("history") or [] if isinstance(h, dict)]
+    final = {str(e) for e in (hist[-1].get("effects") or [])} if hist else set()
+    if not final & set(RICHER_LAW_EFFECTS):
+        return False
+    sec = _f(js.get("seconds"))
+    return not (math.isfinite(sec) and sec <= RICHER_LAW_SECONDS)
+
+
 def _took(marker: Union[str, PathTest], row: Dict[str, Any]) -> bool:
     if isinstance(marker, PathTest):
         return marker.took(row)
@@ -879,6 +905,18 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "backlash-000 right with nothing else added (fam_rr71b/g/j/k/l/m_0522f58)",
                      PathTest(_compliant_took, "no fit of backlash's compliant flanks, no backlash candidate in a pair "
                               "or rival step that kept something")),
+    "5d323d9b573b": ("49cefa2f99a6",
+                     "c4baab4: after the rounds (the last found nothing significant) and above the floor, each effect "
+                     "in the model is refitted with every effect in with each richer law of VARIANTS that only adds "
+                     "parameters, kept where it beats the model (loop._try_richer_laws); history steps gain "
+                     "law_refined",
+                     "the step is new and runs after the loop, on its final model only; it changes that model's "
+                     "law, never its effects, their rounds or the first, and the history's smallest error can only "
+                     "fall: the counts read nothing else, but for the time it adds (_richer_law_took: a final model "
+                     "with an effect of RICHER_LAW_EFFECTS and more than RICHER_LAW_SECONDS). Reruns on c4baab4 "
+                     "(session 72, this machine): RERUNS",
+                     PathTest(_richer_law_took, "no effect with a richer law in the final model, or a diagnosis of at "
+                              f"most {RICHER_LAW_SECONDS:g} s")),
 }
 
 

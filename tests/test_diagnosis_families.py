@@ -390,6 +390,11 @@ def test_benchmark_classifies_diagnosis_output():
     h = [([], 10.0), (["payload_mass"], 3.0), (["payload_mass", "joint_friction"], 0.1)]
     assert bench.classify(pair, {"rc": 0, "json": _js(h), "failure": None})["ok"]
     assert not bench.classify(pair, {"rc": 0, "json": _js(h[:2]), "failure": None})["ok"]
+    # a richer law given to an effect already in (law_refined) adds nothing
+    js = _js(h + [(["payload_mass", "joint_friction"], 0.05)])
+    js["history"][-1]["law_refined"] = "joint_friction: Stribeck"
+    refined = bench.classify(pair, {"rc": 0, "json": js, "failure": None})
+    assert refined["ok"] and refined["added"] == ["payload_mass", "joint_friction"] and refined["min_error"] == 0.05
     # with round tags: the model at the end of round 2 (a swap in round 2 counts, an
     # addition in round 3 does not)
     def tagged(steps):
@@ -767,6 +772,34 @@ def test_the_compliant_path_test_flags_every_result_that_fitted_compliant_flanks
              "significant; the model stands")
     assert not took({"truth": truth, "json": {"rounds": [], "notes": [quiet]}})
     assert took({"truth": truth, "json": {"rounds": [], "notes": [], "history": [{"effects": ["backlash"], "variant": "compliant flanks"}]}})
+
+
+def test_the_richer_law_path_test_flags_long_results_ending_with_an_effect_it_refits():
+    """The PathTest of the richer-law step after the rounds (version 5d323d9b573b's
+    successor): a result may depend on it only where its final model has an effect with a
+    law that only adds parameters and the diagnosis took more than RICHER_LAW_SECONDS (the
+    step changes no effect, round or first effect, and the smallest error can only fall);
+    a nominal or disturbance run never (nothing added)."""
+    from popup import diagnosis as dg
+
+    took = bench._richer_law_took
+
+    def row(final, seconds):
+        hist = [{"effects": [], "round": 0}] + ([{"effects": final, "round": 1}] if final else [])
+        js = {"history": hist, "notes": []}
+        if seconds is not None:
+            js["seconds"] = seconds
+        return {"json": js}
+
+    long = bench.RICHER_LAW_SECONDS + 1.0
+    assert took(row(["pressure_leak", "joint_friction"], long))
+    assert took(row(["payload_mass"], None))  # no time recorded: read as long
+    assert not took(row(["pressure_leak", "joint_friction"], bench.RICHER_LAW_SECONDS))
+    assert not took(row(["pressure_leak", "sensor_delay"], long))
+    assert not took(row([], long)) and not took({"json": {}})
+    # the effects it names are those with a law that only adds parameters
+    only_extra = {e for e, vs in dg.VARIANTS.items() for v in vs if v.get("extra") and "structure" not in v and not v.get("alternative")}
+    assert only_extra == set(bench.RICHER_LAW_EFFECTS)
 
 
 def test_the_first_pair_path_test_flags_every_result_that_reached_the_first_round_pair_step():
