@@ -914,7 +914,10 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "law, never its effects, their rounds or the first, and the history's smallest error can only "
                      "fall: the counts read nothing else, but for the time it adds (_richer_law_took: a final model "
                      "with an effect of RICHER_LAW_EFFECTS and more than RICHER_LAW_SECONDS). Reruns on c4baab4 "
-                     "(session 72, this machine): RERUNS",
+                     "(session 72, this machine) of the 20 nominal runs of seeds 784 and 787 (popup, MuJoCo), made and "
+                     "first diagnosed on da35e12: all bit-identical (equivalence.py; fam_rr72n_c4baab4, fam_rr72m_c4baab4); "
+                     "and of popup pair 786-000, which took it: right, cut by the time limit in round 3 on shared cores "
+                     "(fam_rr72p_c4baab4)",
                      PathTest(_richer_law_took, "no effect with a richer law in the final model, or a diagnosis of at "
                               f"most {RICHER_LAW_SECONDS:g} s")),
 }
