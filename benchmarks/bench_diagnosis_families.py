@@ -297,6 +297,10 @@ CRITERION = {
 #: ``member_sigma``, ``families.member_size``): the pair is counted under (e), not (c).
 DETECTABLE_SIGMA = 1.0
 
+#: (duration [s], sample rate [Hz]) of the runs issue 18 was reported on (``popup-lab``, an
+#: independent simulator): the report counts the results of this format apart as well.
+INDEPENDENT_FORMAT = (20.0, 500.0)
+
 
 #: The rate each count must reach (issue 18: ≥ 95 % of effect runs and of pairs, false
 #: alarms on ≤ 5 % of nominal runs; the disturbance held to the same rate).
@@ -425,6 +429,14 @@ def table(rows: List[Dict[str, Any]], engine: str) -> Tuple[str, Dict[str, Any]]
         by_rate = {f"{rt:g} Hz": [r for r in eff if float(r["truth"].get("rate", math.nan)) == rt] for rt in rates}
         lines.append("(a) by sample rate: " + ", ".join(f"{k} {sum(1 for r in g if r['outcome']['ok'])}/{len(g)}" for k, g in by_rate.items() if g))
         counts["effect_by_rate"] = {k: [sum(1 for r in g if r["outcome"]["ok"]), len(g)] for k, g in by_rate.items() if g}
+    fmt = [r for r in rs if float(r["truth"].get("duration", math.nan)) == INDEPENDENT_FORMAT[0]
+           and float(r["truth"].get("rate", math.nan)) == INDEPENDENT_FORMAT[1]]
+    if fmt:
+        # a failed diagnosis (ok None) counts as a miss here too
+        by_kind = {k: [r for r in fmt if r["outcome"]["kind"] == k] for k in CRITERION}
+        counts["independent_format"] = {k: [sum(1 for r in g if r["outcome"]["ok"]), len(g)] for k, g in by_kind.items() if g}
+        lines.append(f"{INDEPENDENT_FORMAT[0]:g} s at {INDEPENDENT_FORMAT[1]:g} Hz (the independent runs' format), of the above: "
+                     + ", ".join(f"{k} {ok}/{n}" for k, (ok, n) in counts["independent_format"].items()))
     return "\n".join(lines), {"families": summary, "counts": counts}
 
 

@@ -2237,3 +2237,24 @@ def test_the_bench_gives_the_diagnosis_a_time_limit_inside_its_timeout(monkeypat
     bench.diagnose(tmp_path, timeout=1000, extra=["--time-limit", "50"])
     cmd, _ = seen[-1]
     assert cmd.count("--time-limit") == 1 and cmd[cmd.index("--time-limit") + 1] == "50"
+
+
+def test_the_table_counts_the_independent_runs_format_apart():
+    def row(name, kind, hidden, steps, duration, rate):
+        truth = {"kind": kind, "family": hidden[0] if hidden else "nominal", "hidden": hidden, "engine": "popup",
+                 "style": "lab", "duration": duration, "rate": rate}
+        res = {"rc": 0, "json": _js(steps), "failure": None}
+        return {"run": name, "truth": truth, "diagnosis": {"rc": 0, "failure": None, "seconds": 1.0}, "json": res["json"],
+                "outcome": bench.classify(truth, res)}
+    d, r = bench.INDEPENDENT_FORMAT
+    rows = [row("a", "effect", ["payload_mass"], [([], 10.0), (["payload_mass"], 0.2)], d, r),
+            row("b", "effect", ["payload_mass"], [([], 10.0), (["torsion"], 0.2)], d, r),
+            row("c", "effect", ["payload_mass"], [([], 10.0), (["payload_mass"], 0.2)], 12.0, r),
+            row("d", "effect", ["payload_mass"], [([], 10.0), (["payload_mass"], 0.2)], d, 1000.0),
+            row("n", "nominal", [], [([], 0.1), (["air_drag"], 0.05)], d, r)]
+    text, summ = bench.table(rows, "popup")
+    # only the runs of that length and rate, each kind apart, misses counted
+    assert summ["counts"]["independent_format"] == {"effect": [1, 2], "nominal": [0, 1]}
+    assert f"{d:g} s at {r:g} Hz" in text and "effect 1/2, nominal 0/1" in text
+    text, summ = bench.table(rows[2:4], "popup")
+    assert "independent_format" not in summ["counts"] and f"{d:g} s at {r:g} Hz" not in text
