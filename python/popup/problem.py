@@ -408,7 +408,9 @@ class ReplayProblem:
             self._enc_up = p._enc_up
             self.q_base, self.q_corr, self.compliance = p.q_base, p.q_corr, p.compliance
             self._nominal = None
+            self.horizon: Optional[float] = p.horizon  # judged before this time [s] only (:meth:`until`)
             return
+        self.horizon = None
         notes: List[str] = []
         self.notes = notes
         self._enc = [None]
@@ -510,6 +512,27 @@ class ReplayProblem:
             p.q_base, p.q_corr = self.q_base[k_enc], self.q_corr[k_enc]
         if self.closed:
             p.duration = min(self.duration, float(t_end - self.t0))
+        return p
+
+    def until(self, t_end: float) -> "ReplayProblem":
+        """The same problem judged on the measured samples before ``t_end`` [s] only, its
+        held-out split kept where it lies (encoder and references cut there): the part of
+        the run a model's replay can predict (a gear rattling in its play diverges from
+        any replay past a few seconds, :func:`popup.diagnosis.candidate.predictable_until`).
+        ``self`` where that keeps every sample or fewer than 20."""
+        keep = self.time < t_end
+        if keep.all() or keep.sum() < 20:
+            return self
+        p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
+        p.time, p.measured = self.time[keep], self.measured[keep]
+        p.used, p.train, p.validation = self.used[keep], self.train[keep], self.validation[keep]
+        k_enc = self.t_enc <= t_end + 1e-9
+        if k_enc.sum() >= 5:
+            p.t_enc, p.q_enc, p.q_enc_raw = self.t_enc[k_enc], self.q_enc[k_enc], self.q_enc_raw[k_enc]
+            p.q_base, p.q_corr = self.q_base[k_enc], self.q_corr[k_enc]
+        if self.closed:
+            p.duration = min(self.duration, float(t_end - self.t0))
+        p.horizon = float(t_end)
         return p
 
     def with_unseen_motion(self, compliance: Any, q_corr: np.ndarray) -> "ReplayProblem":

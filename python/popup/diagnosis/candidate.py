@@ -14,7 +14,7 @@ from .. import effects as fx
 from .. import estimate as est
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
-from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PINNED_READINGS, PLAY_PARAMS, PLAY_READINGS, RIGID_WHERE_ZERO, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
+from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PINNED_READINGS, PLAY_PARAMS, PREDICT_REL, PREDICT_TOL, PREDICT_WINDOW_S, PLAY_READINGS, RIGID_WHERE_ZERO, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
                     STABILITY_MARGIN, STIFFEST, STRUCTURE, UNSEEN_ALTERNATIONS, VARIANTS)
 from .results import Suspect, fmt_list
 
@@ -84,6 +84,42 @@ def _step_for(prob: ReplayProblem, m: "Model", check: "Model") -> float:
     period = 1.0 / prob.sample_rate
     k = max(1, int(math.ceil(period / (STABILITY_MARGIN * sdt) - 1e-9)))
     return period / k
+
+
+def predictable_until(prob: ReplayProblem, name: str, flat: np.ndarray) -> Optional[float]:
+    """The time [s] past which the replay of ``prob``'s model with ``flat`` is not predicted
+    by its parameters: where the same model with ``name``'s play :data:`PREDICT_REL` wider
+    moves the channels by more than :data:`PREDICT_TOL` noise units (RMS over a
+    :data:`PREDICT_WINDOW_S` window). A link side rattling between compliant flanks is
+    chaotic: its impacts' timing, and every channel after, depend on the play below any
+    resolution, so past that time no model (the truth's own law included) can be judged by
+    its free-run error there. ``None`` for an effect without play, or a replay predicted to
+    the end (or not for its first fifth: too short to judge on)."""
+    key = PLAY_PARAMS.get(name)
+    if key is None:
+        return None
+    sl = fx.EFFECTS[name].params[key].slice
+    twin = np.array(flat, dtype=float)
+    if not np.any(twin[sl] > 0):
+        return None
+    twin[sl] = twin[sl] * (1.0 + PREDICT_REL)
+    z = prob.residuals(prob.simulate(np.stack([np.asarray(flat, dtype=float), twin])))
+    d = np.asarray(z[1] - z[0], dtype=float)
+    t = np.asarray(prob.time, dtype=float)
+    t0, t1 = float(t[0]), float(t[-1])
+    k = np.floor((t - t0) / PREDICT_WINDOW_S).astype(int)
+    for w in range(int(k.max()) + 1):
+        sel = (k == w) & prob.used
+        if not sel.any():
+            continue
+        x = d[sel]
+        x = x[np.isfinite(x)]
+        if x.size and math.sqrt(float(np.mean(x * x))) > PREDICT_TOL:
+            tp = t0 + w * PREDICT_WINDOW_S
+            if tp - t0 < 0.2 * (t1 - t0):
+                return None
+            return tp
+    return None
 
 
 def unresolved_play(prob: ReplayProblem, name: str, flat: np.ndarray) -> str:
@@ -320,7 +356,7 @@ class _Fitted:
             n_eff=self.neff, n_rollouts=nfev, tested=True, explained=self.explained,
             message="; ".join(m for m in (self.unresolved, self.unpinned, "not checked on the held-out samples: it does not act there" if self.silent else "", self._share_note(),
                                           self.null_note, message) if m),
-            validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant,
+            validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant, horizon=self.prob.horizon,
             identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free if p.effect == self.name}),
             refitted={e: est.params_dict(e, self.out.flat) for e in sorted({p.effect for p, _ in self.free if p.effect != self.name})},
         )
@@ -389,16 +425,24 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         # each from the last optimum (continuation), and offer the result as one more start
         tie = _shared_groups(free_all, name, shared)
         starts = list(cands)
-        xh = _continued(p, name, free_all, flat, starts, iters)
+        xh, hz = _continued(p, name, free_all, flat, starts, iters)
         if xh is not None:
             cands.append(xh)
             if tie:
                 # the same with the ``shared`` parameters one value on every entry (half the
                 # unknowns): per entry, gaps and flanks trade off and the fit ends in a basin
                 # of its own; the shared optimum is one more start for the per-entry fit
-                xt = _continued(p, name, free_all, flat, starts, iters, tie)
+                xt, ht = _continued(p, name, free_all, flat, starts, iters, tie)
                 if xt is not None:
                     cands.append(xt)
+                    hz = ht if hz is None else (hz if ht is None else min(hz, ht))
+        if hz is not None:
+            # judged where its replay is predictable: past hz, a play PREDICT_REL wider
+            # moves the channels by more than the floor test can tell (predictable_until)
+            p, nb = p.until(hz), nb.until(hz)
+            z_base = nb.residuals(nb.nominal_simulation())
+            note = "; ".join(m for m in (note, f"judged on t < {hz:.3g} s: past it the replay of this fit is not predictable "
+                                               f"(its play {100 * PREDICT_REL:g} % wider moves the channels by more than {PREDICT_TOL:g} noise units)") if m)
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
     z_null = None
@@ -419,15 +463,17 @@ def _shared_groups(free: List[Tuple[fx.EffectParam, int]], name: str, shared: Op
 
 
 def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, cands: List[np.ndarray],
-               iters: int, tie: Optional[List[List[int]]] = None) -> Optional[np.ndarray]:
+               iters: int, tie: Optional[List[List[int]]] = None) -> Tuple[Optional[np.ndarray], Optional[float]]:
     """The best of ``cands`` on a short horizon, fitted there and on horizons doubled in
-    turn, each from the last optimum (``tie``: with those groups fitted as one value);
-    ``None`` where the run is no longer than the short horizon."""
+    turn, each from the last optimum (``tie``: with those groups fitted as one value), and
+    the time [s] the continuation stopped at because the fit's replay is not predictable
+    past it (:func:`predictable_until`, checked before each doubling; ``None``: it went to
+    the end); ``(None, None)`` where the run is no longer than the short horizon."""
     t0, t1 = float(p.time[0]), float(p.time[-1])
     h = max(SHORT_HORIZON_S, 0.2 * (t1 - t0))
     ph = p.with_horizon(t0 + h)
     if ph is p:
-        return None
+        return None, None
     if tie:
         cands = [est.tied(free_all, c, tie) for c in cands]
     xh, _ = est.best_start(ph, free_all, flat, cands)
@@ -435,7 +481,14 @@ def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam,
     if name in COORDINATE_SEEDS:
         xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh, _untied(free_all, name, tie))
     xh = est.fit(ph, flat, free_all, xh, iters, tie=tie).x
-    while 2.0 * h < t1 - t0:
+    while True:
+        hz = _horizon_of(p, name, free_all, flat, xh)
+        if hz is not None and hz < min(t0 + 2.0 * h, t1):
+            # a longer horizon would fit a replay the parameters no longer predict: the
+            # objective there is chaotic and the fit leaves the basin it has found
+            return xh, hz
+        if not 2.0 * h < t1 - t0:
+            break
         h *= 2.0
         ph = p.with_horizon(t0 + h)
         if unresolved:
@@ -446,7 +499,17 @@ def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam,
         xh = est.fit(ph, flat, free_all, xh, iters, mask=p.train[p.time <= t0 + h], tie=tie).x
     if unresolved:
         xh, _ = _coordinate_seeds(p, name, free_all, flat, xh, unresolved)
-    return xh
+    return xh, None
+
+
+def _horizon_of(p: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray) -> Optional[float]:
+    """:func:`predictable_until` of ``p``'s model with ``free`` set to ``x`` (``None`` on a
+    problem already cut at its horizon: it is judged there once)."""
+    if p.horizon is not None or name not in PLAY_PARAMS:
+        return None
+    f = np.asarray(flat, dtype=float).copy()
+    f[[q.offset + i for q, i in free]] = x
+    return predictable_until(p, name, f)
 
 
 def _untied(free: List[Tuple[fx.EffectParam, int]], name: str, tie: Optional[List[List[int]]]) -> Optional[List[int]]:

@@ -17,7 +17,7 @@ from ..io import MeasuredRun
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
 from ..results import UNITS
-from .rules import (AT_FLOOR, ENCODER_NOTE, FIRST_PAIRS, JOINT_TOP, MIN_EXPLAINED, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, PAIR_HINTS, Progress, SCORE_THRESHOLD,
+from .rules import (AT_FLOOR, ENCODER_NOTE, FIRST_PAIRS, JOINT_TOP, MIN_EXPLAINED, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, PAIR_HINTS, PREDICT_REL, PREDICT_TOL, Progress, SCORE_THRESHOLD,
                     STEP_HALVINGS, VARIANTS, model_at_floor)
 from .results import Diagnosis, History, HistoryStep, Suspect, final_problem, step_at_floor
 from .candidate import left_out, limit_passed, unresolved_play
@@ -160,6 +160,13 @@ def _improve(
             if d.best is not None:
                 rnd += 1
                 s = d.best
+                if s.horizon is not None and prob.horizon is None:
+                    # its replay is predictable only up to s.horizon: every model is judged
+                    # there from now on, the nominal one too
+                    prob, cprob = prob.until(s.horizon), cprob.until(s.horizon)
+                    steps[0] = _step(prob, [], {}, 0)
+                    notes.append(f"judged on t < {s.horizon:.3g} s from round {rnd} on: past it the replay with {s.effect} is not predictable "
+                                 f"(a play {100 * PREDICT_REL:g} % wider moves it by more than {PREDICT_TOL:g} noise units); the nominal error there is {steps[0].error:.3g} noise units")
                 before = (list(added), {e: list(v) for e, v in fitted_params.items()}, cprob)  # the model s is added to
                 added.append(s.effect)
                 fitted_params[s.effect] = list(s.fitted)

@@ -115,6 +115,7 @@ class Suspect:
     fitted: List[str] = field(default_factory=list)
     refitted: Dict[str, Dict[str, List[float]]] = field(default_factory=dict)
     unseen: Optional[Tuple[np.ndarray, np.ndarray]] = field(default=None, repr=False, compare=False)
+    horizon: Optional[float] = None
 
     @property
     def relative_drop(self) -> float:
@@ -157,6 +158,7 @@ class Suspect:
             "evidence": {k: (_num(v) if isinstance(v, float) else v) for k, v in self.evidence.items()},
             "n_eff": _num(self.n_eff),
             "dt": _num(self.dt),
+            "horizon_s": None if self.horizon is None else _num(self.horizon),
             "unseen_compliance": None if self.unseen is None else [_num(x) for x in self.unseen[0]],
             "message": self.message,
         }

@@ -197,11 +197,11 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
                  # its stiffness would not be in the linearisation at all), damped at
                  # FLANK_CHECK_DAMPING; a joint whose play vanishes in its fit is given the
                  # rigid flanks back (RIGID_WHERE_ZERO)
-                 {"name": "compliant flanks", "extra": ["contact_k", "contact_c"],
+                 {"name": "compliant flanks", "extra": ["contact_k", "contact_c", "inertia"],
                   "structure": {"contact_k": [1e4, 1e4, 1e4], "contact_c": [5.0, 5.0, 5.0]},
                   "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [FLANK_CHECK_DAMPING] * 3,
                                "gap": [1e-3] * 3},
-                  "seeds": [{"contact_k": 3e3, "contact_c": 3.0}, {"contact_k": 3e4, "contact_c": 10.0}, {"contact_k": 1e5, "contact_c": 30.0}],
+                  "seeds": [{"contact_k": k, "contact_c": c, "inertia": j} for k, c in ((3e3, 3.0), (3e4, 10.0), (1e5, 30.0)) for j in (0.01, 0.1)],
                   # one flank law (and link side) on every joint with play, fitted with the gaps
                   # for one more start: per joint, gaps and flanks trade off (MuJoCo's soft gear
                   # 760: flanks 4-7 % off the truth's gaps replay at 8.5 noise units, the truth at 1.0)
@@ -239,6 +239,14 @@ Progress = Callable[[Dict[str, Any]], None]
 #: Effect parameters [rad per motor joint] that are play in a joint: a play narrower than
 #: :data:`PLAY_READINGS` encoder readings (:attr:`ReplayProblem.encoder_width`) is not a finding.
 PLAY_PARAMS = {"backlash": "gap"}
+PREDICT_REL = 1e-3
+"""Relative change of a play (``PLAY_PARAMS``) whose effect on the replay sets the
+predictable horizon (:func:`popup.diagnosis.candidate.predictable_until`): about the 95 % resolution of a fitted gap."""
+PREDICT_TOL = 0.3
+"""RMS change [noise units] over one window, across channels, past which a replay is no
+longer predicted by its parameters (``AT_FLOOR``: what the floor test can tell)."""
+PREDICT_WINDOW_S = 1.0
+"""Window [s] over which :data:`PREDICT_TOL` is measured."""
 
 
 PLAY_READINGS = 0.5
