@@ -14,7 +14,7 @@ from .. import effects as fx
 from .. import estimate as est
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
-from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PINNED_READINGS, PLAY_PARAMS, PREDICT_REL, PREDICT_TOL, PREDICT_WINDOW_S, PLAY_READINGS, RIGID_WHERE_ZERO, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
+from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PINNED_READINGS, PLAY_PARAMS, model_at_floor, PREDICT_REL, PREDICT_TOL, PREDICT_WINDOW_S, PLAY_READINGS, RIGID_WHERE_ZERO, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
                     STABILITY_MARGIN, STIFFEST, STRUCTURE, UNSEEN_ALTERNATIONS, VARIANTS)
 from .results import Suspect, fmt_list
 
@@ -418,6 +418,7 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
     cands = [np.concatenate([c, cur]) for c in cands]
     free_all = free + others
     iters = max(max_iter, MIN_ITER.get(name, 0))
+    at: Optional[Tuple[np.ndarray, float]] = None  # (the fit, the time) where the continuation found its replay unpredictable
     if name in SHORT_FIRST and seeds:
         # a lightly damped response (or a link side crossing its gap) drifts out of phase
         # over a long run, which makes the full-run objective a needle around the truth:
@@ -425,26 +426,33 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         # each from the last optimum (continuation), and offer the result as one more start
         tie = _shared_groups(free_all, name, shared)
         starts = list(cands)
-        xh, hz = _continued(p, name, free_all, flat, starts, iters)
+        xh, at = _continued(p, name, free_all, flat, starts, iters)
         if xh is not None:
             cands.append(xh)
             if tie:
                 # the same with the ``shared`` parameters one value on every entry (half the
                 # unknowns): per entry, gaps and flanks trade off and the fit ends in a basin
                 # of its own; the shared optimum is one more start for the per-entry fit
-                xt, ht = _continued(p, name, free_all, flat, starts, iters, tie)
+                xt, at_t = _continued(p, name, free_all, flat, starts, iters, tie)
                 if xt is not None:
                     cands.append(xt)
-                    hz = ht if hz is None else (hz if ht is None else min(hz, ht))
-        if hz is not None:
-            # judged where its replay is predictable: past hz, a play PREDICT_REL wider
-            # moves the channels by more than the floor test can tell (predictable_until)
-            p, nb = p.until(hz), nb.until(hz)
-            z_base = nb.residuals(nb.nominal_simulation())
-            note = "; ".join(m for m in (note, f"judged on t < {hz:.3g} s: past it the replay of this fit is not predictable "
-                                               f"(its play {100 * PREDICT_REL:g} % wider moves the channels by more than {PREDICT_TOL:g} noise units)") if m)
+                    if at_t is not None and (at is None or at_t[1] < at[1]):
+                        at = at_t
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
+    if name in SHORT_FIRST and seeds and at is not None and not model_at_floor(p, *p.error(out.z)):
+        # a fit above its floor on the whole run, whose replay a play PREDICT_REL wider left
+        # on the way (predictable_until): judged before that time instead, where it is at
+        # its floor (a link side rattling between compliant flanks is chaotic)
+        ph, nh = p.until(at[1]), nb.until(at[1])
+        xs_h, _ = est.best_start(ph, free_all, flat, [at[0], xs] + cands)
+        out_h = est.fit(ph, flat, free_all, xs_h, iters)
+        if model_at_floor(ph, *ph.error(out_h.z)):
+            p, nb, out = ph, nh, out_h
+            z_base = nb.residuals(nb.nominal_simulation())
+            note = "; ".join(m for m in (note, f"judged on t < {at[1]:.3g} s: past it the replay of this fit is not predictable "
+                                               f"(its play {100 * PREDICT_REL:g} % wider moves the channels by more than {PREDICT_TOL:g} "
+                                               "noise units), and before it the fit is at its floor while on the whole run it is not") if m)
     z_null = None
     if others:
         nf = np.array(nb.model.effects_flat, dtype=float)
@@ -463,12 +471,12 @@ def _shared_groups(free: List[Tuple[fx.EffectParam, int]], name: str, shared: Op
 
 
 def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, cands: List[np.ndarray],
-               iters: int, tie: Optional[List[List[int]]] = None) -> Tuple[Optional[np.ndarray], Optional[float]]:
+               iters: int, tie: Optional[List[List[int]]] = None) -> Tuple[Optional[np.ndarray], Optional[Tuple[np.ndarray, float]]]:
     """The best of ``cands`` on a short horizon, fitted there and on horizons doubled in
-    turn, each from the last optimum (``tie``: with those groups fitted as one value), and
-    the time [s] the continuation stopped at because the fit's replay is not predictable
-    past it (:func:`predictable_until`, checked before each doubling; ``None``: it went to
-    the end); ``(None, None)`` where the run is no longer than the short horizon."""
+    turn, each from the last optimum (``tie``: with those groups fitted as one value); and,
+    where the check before a doubling found the fit's replay not predictable past a time
+    the next horizon reaches (:func:`predictable_until`), the fit then and that time [s]
+    (``None`` otherwise); ``(None, None)`` where the run is no longer than the short horizon."""
     t0, t1 = float(p.time[0]), float(p.time[-1])
     h = max(SHORT_HORIZON_S, 0.2 * (t1 - t0))
     ph = p.with_horizon(t0 + h)
@@ -481,12 +489,12 @@ def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam,
     if name in COORDINATE_SEEDS:
         xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh, _untied(free_all, name, tie))
     xh = est.fit(ph, flat, free_all, xh, iters, tie=tie).x
+    at: Optional[Tuple[np.ndarray, float]] = None
     while True:
-        hz = _horizon_of(p, name, free_all, flat, xh)
-        if hz is not None and hz < min(t0 + 2.0 * h, t1):
-            # a longer horizon would fit a replay the parameters no longer predict: the
-            # objective there is chaotic and the fit leaves the basin it has found
-            return xh, hz
+        if at is None:
+            hz = _horizon_of(p, name, free_all, flat, xh)
+            if hz is not None and hz < min(t0 + 2.0 * h, t1):
+                at = (xh.copy(), hz)
         if not 2.0 * h < t1 - t0:
             break
         h *= 2.0
@@ -499,7 +507,7 @@ def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam,
         xh = est.fit(ph, flat, free_all, xh, iters, mask=p.train[p.time <= t0 + h], tie=tie).x
     if unresolved:
         xh, _ = _coordinate_seeds(p, name, free_all, flat, xh, unresolved)
-    return xh, None
+    return xh, at
 
 
 def _horizon_of(p: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray) -> Optional[float]:
