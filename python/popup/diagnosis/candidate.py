@@ -14,7 +14,7 @@ from .. import effects as fx
 from .. import estimate as est
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
-from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PINNED_READINGS, PLAY_PARAMS, model_at_floor, PREDICT_REL, PREDICT_TOL, PREDICT_WINDOW_S, PLAY_READINGS, RIGID_WHERE_ZERO, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
+from .rules import (AT_FLOOR, COORDINATE_SEEDS, COORDINATE_STEP, LIMIT_BEYOND_MIN, LIMIT_BEYOND_SHARE, LIMIT_MARGIN, LIMIT_PARAMS, MIN_EXPLAINED, MIN_ITER, PINNED_READINGS, PLAY_PARAMS, PREDICT_REL, PREDICT_TOL, PREDICT_WINDOW_S, PLAY_READINGS, RIGID_WHERE_ZERO, SCORE_THRESHOLD, SHORT_FIRST, SHORT_HORIZON_S,
                     STABILITY_MARGIN, STIFFEST, STRUCTURE, UNSEEN_ALTERNATIONS, VARIANTS)
 from .results import Suspect, fmt_list
 
@@ -278,6 +278,7 @@ class _Fitted:
                  k: Optional[int] = None, z_null: Optional[np.ndarray] = None) -> None:
         self.name, self.variant, self.prob, self.z_base, self.free, self.out = name, variant, prob, z_base, free, out
         self.k = len(free) if k is None else int(k)  # the candidate's own parameters (refitted earlier effects excluded)
+        self.unpredictable_after: Optional[float] = None  # where its continuation's replay became unpredictable [s] (_continued)
         self.e1, self.per1 = prob.error(out.z)
         self.v1, _ = prob.error(out.z, prob.validation)
         t = self._against(z_base)
@@ -356,7 +357,7 @@ class _Fitted:
             n_eff=self.neff, n_rollouts=nfev, tested=True, explained=self.explained,
             message="; ".join(m for m in (self.unresolved, self.unpinned, "not checked on the held-out samples: it does not act there" if self.silent else "", self._share_note(),
                                           self.null_note, message) if m),
-            validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant, horizon=self.prob.horizon,
+            validation_before=self.v0, validation_after=self.v1, validation_lr=self.lr_val, variant=self.variant, horizon=self.prob.horizon, unpredictable_after=self.unpredictable_after,
             identifiability=ident, dt=float(self.prob.model.dt), fitted=sorted({p.name for p, _ in self.free if p.effect == self.name}),
             refitted={e: est.params_dict(e, self.out.flat) for e in sorted({p.effect for p, _ in self.free if p.effect != self.name})},
         )
@@ -440,19 +441,6 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
                         at = at_t
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
-    if name in SHORT_FIRST and seeds and at is not None and not model_at_floor(p, *p.error(out.z)):
-        # a fit above its floor on the whole run, whose replay a play PREDICT_REL wider left
-        # on the way (predictable_until): judged before that time instead, where it is at
-        # its floor (a link side rattling between compliant flanks is chaotic)
-        ph, nh = p.until(at[1]), nb.until(at[1])
-        xs_h, _ = est.best_start(ph, free_all, flat, [at[0], xs] + cands)
-        out_h = est.fit(ph, flat, free_all, xs_h, iters)
-        if model_at_floor(ph, *ph.error(out_h.z)):
-            p, nb, out = ph, nh, out_h
-            z_base = nb.residuals(nb.nominal_simulation())
-            note = "; ".join(m for m in (note, f"judged on t < {at[1]:.3g} s: past it the replay of this fit is not predictable "
-                                               f"(its play {100 * PREDICT_REL:g} % wider moves the channels by more than {PREDICT_TOL:g} "
-                                               "noise units), and before it the fit is at its floor while on the whole run it is not") if m)
     z_null = None
     if others:
         nf = np.array(nb.model.effects_flat, dtype=float)
@@ -460,7 +448,9 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         nf[ix] = out.flat[ix]
         if not np.array_equal(nf, nb.model.effects_flat):
             z_null = nb.residuals(nb.simulate(nf))[0]
-    return _Fitted(name, variant, p, z_base, free_all, out, k=len(free) + k_extra, z_null=z_null), note
+    fitted = _Fitted(name, variant, p, z_base, free_all, out, k=len(free) + k_extra, z_null=z_null)
+    fitted.unpredictable_after = None if at is None else at[1]
+    return fitted, note
 
 
 def _shared_groups(free: List[Tuple[fx.EffectParam, int]], name: str, shared: Optional[Sequence[str]]) -> List[List[int]]:
@@ -583,7 +573,7 @@ def try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int
     # error, popup's law with the true link-side inertia 49 %), so its variants are tried
     promising = fitted.significant or (fitted.score > SCORE_THRESHOLD and not fitted.unresolved)
     for var in VARIANTS.get(name, []):
-        if not (promising or var.get("alternative") or var.get("always")):
+        if not (promising or var.get("alternative") or var.get("always")) or (var.get("on_horizon") and prob.horizon is None):
             continue
         try:
             struct = dict(STRUCTURE.get(name) or {})
@@ -618,7 +608,9 @@ def try_effect(prob: ReplayProblem, name: str, ev: Dict[str, Any], max_iter: int
     if best_var is not None:
         best = _try_combined(prob, name, best, best_var, tried, max_iter, also, notes)
         best = _rigid_where_no_play(prob, name, best, max_iter, also, notes)
-    return best.suspect(ev, prob.nfev - n0, "; ".join(notes))
+    hints = [f.unpredictable_after for f in [fitted] + [vf for _, vf in tried] if f.unpredictable_after is not None]
+    s = best.suspect(ev, prob.nfev - n0, "; ".join(notes))
+    return replace(s, unpredictable_after=min(hints)) if hints else s
 
 
 def _rigid_where_no_play(prob: ReplayProblem, name: str, best: _Fitted, max_iter: int, also: Optional[List[Tuple[fx.EffectParam, int]]],

@@ -17,7 +17,7 @@ from ..io import MeasuredRun
 from ..problem import ReplayProblem
 from ..unseen import fit_unseen_motion
 from ..results import UNITS
-from .rules import (AT_FLOOR, ENCODER_NOTE, FIRST_PAIRS, JOINT_TOP, MIN_EXPLAINED, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, PAIR_HINTS, PREDICT_REL, PREDICT_TOL, Progress, SCORE_THRESHOLD,
+from .rules import (AT_FLOOR, ENCODER_NOTE, FIRST_PAIRS, JOINT_TOP, MIN_EXPLAINED, MIN_ITER, NOISE_RECHECK, OFFSET_SHARE, OFFSET_Z, PAIR_HINTS, PLAY_PARAMS, PREDICT_REL, PREDICT_TOL, Progress, SCORE_THRESHOLD,
                     STEP_HALVINGS, VARIANTS, model_at_floor)
 from .results import Diagnosis, History, HistoryStep, Suspect, final_problem, step_at_floor
 from .candidate import left_out, limit_passed, unresolved_play
@@ -160,13 +160,6 @@ def _improve(
             if d.best is not None:
                 rnd += 1
                 s = d.best
-                if s.horizon is not None and prob.horizon is None:
-                    # its replay is predictable only up to s.horizon: every model is judged
-                    # there from now on, the nominal one too
-                    prob, cprob = prob.until(s.horizon), cprob.until(s.horizon)
-                    steps[0] = _step(prob, [], {}, 0)
-                    notes.append(f"judged on t < {s.horizon:.3g} s from round {rnd} on: past it the replay with {s.effect} is not predictable "
-                                 f"(a play {100 * PREDICT_REL:g} % wider moves it by more than {PREDICT_TOL:g} noise units); the nominal error there is {steps[0].error:.3g} noise units")
                 before = (list(added), {e: list(v) for e, v in fitted_params.items()}, cprob)  # the model s is added to
                 added.append(s.effect)
                 fitted_params[s.effect] = list(s.fitted)
@@ -234,6 +227,21 @@ def _improve(
                     stage, stage_round = "a pair: ", rnd + 1
                     pr = _pair_from_none(prob, run, cprob, _hints(d), d, diags, effects, threads, max_iter, prog, notes)
                     stage = ""
+                hz = _unpredictable_top(d) if pr is None and lw is None and not added and prob.horizon is None else None
+                if hz is not None and not step_at_floor(steps[-1], prob):
+                    # nothing significant, and the best candidate's replay is not predictable
+                    # past hz (a gear rattling in its play: a play PREDICT_REL wider parts
+                    # from it there by more than the floor test tells): no free-run error past
+                    # hz can judge it, the truth's own law included, so every candidate and
+                    # the nominal model are judged before hz (MuJoCo 802-000, session 74)
+                    prob, cprob = prob.until(hz), cprob.until(hz)
+                    steps[:] = [_step(prob, [], {}, 0)]
+                    notes.append(f"judged on t < {hz:.3g} s from round {rnd + 1} on: past it the replay of the best candidate, {d.suspects[0].effect}, "
+                                 f"is not predictable (a play {100 * PREDICT_REL:g} % wider moves it by more than {PREDICT_TOL:g} noise units); "
+                                 f"the nominal error there is {steps[0].error:.3g} noise units")
+                    d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, rank_at_floor=rank_at_floor)
+                    diags.append(d)
+                    continue
                 if lw is not None:
                     c, current, cprob, ci, fitted_params, d_new = lw
                     added.append(c)
@@ -702,6 +710,15 @@ def _pair_from_none(prob: ReplayProblem, run: MeasuredRun, cprob: ReplayProblem,
         _note(log, f"the pair kept: {' + '.join(best[4])} (of the pairs with a partner below the threshold alone, the largest BIC gain "
                    f"over the nominal: {best_gain:.1f})")
     return best
+
+
+def _unpredictable_top(d: Diagnosis) -> Optional[float]:
+    """Where the replay of ``d``'s best-ranked tested candidate, an effect with play
+    (:data:`PLAY_PARAMS`), is not predictable [s] (``None``: predictable, or another effect)."""
+    top = next((s for s in d.suspects if s.tested), None)
+    if top is None or top.effect not in PLAY_PARAMS:
+        return None
+    return top.unpredictable_after
 
 
 def _step(cprob: ReplayProblem, added: Sequence[str], ci: Dict[str, Dict[str, List[float]]], rnd: int, **kw: Any) -> HistoryStep:

@@ -116,6 +116,11 @@ class Suspect:
     refitted: Dict[str, Dict[str, List[float]]] = field(default_factory=dict)
     unseen: Optional[Tuple[np.ndarray, np.ndarray]] = field(default=None, repr=False, compare=False)
     horizon: Optional[float] = None
+    """Where it was judged on the samples before this time [s] only (the loop's horizon step)."""
+    unpredictable_after: Optional[float] = None
+    """Where a fit of its continuation replayed a play :data:`~popup.diagnosis.rules.PREDICT_REL`
+    wider by more than :data:`~popup.diagnosis.rules.PREDICT_TOL` noise units past this time
+    [s], within the run (:func:`popup.diagnosis.candidate.predictable_until`)."""
 
     @property
     def relative_drop(self) -> float:
@@ -159,6 +164,7 @@ class Suspect:
             "n_eff": _num(self.n_eff),
             "dt": _num(self.dt),
             "horizon_s": None if self.horizon is None else _num(self.horizon),
+            "unpredictable_after_s": None if self.unpredictable_after is None else _num(self.unpredictable_after),
             "unseen_compliance": None if self.unseen is None else [_num(x) for x in self.unseen[0]],
             "message": self.message,
         }

@@ -197,14 +197,26 @@ VARIANTS: Dict[str, List[Dict[str, Any]]] = {
                  # its stiffness would not be in the linearisation at all), damped at
                  # FLANK_CHECK_DAMPING; a joint whose play vanishes in its fit is given the
                  # rigid flanks back (RIGID_WHERE_ZERO)
-                 {"name": "compliant flanks", "extra": ["contact_k", "contact_c", "inertia"],
+                 {"name": "compliant flanks", "extra": ["contact_k", "contact_c"],
+                  "structure": {"contact_k": [1e4, 1e4, 1e4], "contact_c": [5.0, 5.0, 5.0]},
+                  "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [FLANK_CHECK_DAMPING] * 3,
+                               "gap": [1e-3] * 3},
+                  "seeds": [{"contact_k": 3e3, "contact_c": 3.0}, {"contact_k": 3e4, "contact_c": 10.0}, {"contact_k": 1e5, "contact_c": 30.0}],
+                  # one flank law (and link side) on every joint with play, fitted with the gaps
+                  # for one more start: per joint, gaps and flanks trade off (MuJoCo's soft gear
+                  # 760: flanks 4-7 % off the truth's gaps replay at 8.5 noise units, the truth at 1.0)
+                  "shared": ["contact_k", "contact_c", "inertia"]},
+                 # the same with the link side's inertia fitted too, tried only on a run cut at
+                 # its predictable horizon (``on_horizon``, the loop's horizon step): a link side rattling
+                 # between compliant flanks is chaotic, and how often it crosses its gap is set
+                 # by that inertia (MuJoCo 802-000, benchmarks/README.md session 74: on its first
+                 # 7 s this variant found the truth, 13.1 -> 0 noise units; without the inertia
+                 # nothing was added)
+                 {"name": "compliant flanks and link side", "extra": ["contact_k", "contact_c", "inertia"], "on_horizon": True,
                   "structure": {"contact_k": [1e4, 1e4, 1e4], "contact_c": [5.0, 5.0, 5.0]},
                   "stiffest": {"contact_k": [est.BOUNDS[("backlash", "contact_k")][1]] * 3, "contact_c": [FLANK_CHECK_DAMPING] * 3,
                                "gap": [1e-3] * 3},
                   "seeds": [{"contact_k": k, "contact_c": c, "inertia": j} for k, c in ((3e3, 3.0), (3e4, 10.0), (1e5, 30.0)) for j in (0.01, 0.1)],
-                  # one flank law (and link side) on every joint with play, fitted with the gaps
-                  # for one more start: per joint, gaps and flanks trade off (MuJoCo's soft gear
-                  # 760: flanks 4-7 % off the truth's gaps replay at 8.5 noise units, the truth at 1.0)
                   "shared": ["contact_k", "contact_c", "inertia"]}],
     "torsion": [{"name": "link 1 only", "structure": {"k_t": [200.0, math.inf], "c_t": [0.2, 0.0]}},
                 {"name": "link 2 only", "structure": {"k_t": [math.inf, 200.0], "c_t": [0.0, 0.2]}}],
@@ -216,7 +228,9 @@ the base ones (from the base fit and the variant's ``seeds``), or another ``stru
 or not, and so is a refinement marked ``always`` (one whose base law cannot stand in for
 it, so a base below the threshold says nothing about it); unlike an alternative, it is
 combined with the other variants. ``shared``: parameters also fitted as one value on every
-entry (with the others per entry) for one more start of the fit per entry."""
+entry (with the others per entry) for one more start of the fit per entry. ``on_horizon``:
+tried only on a problem cut at its predictable horizon (:meth:`ReplayProblem.until`, the
+loop's horizon step), where a fit of more parameters is not lost in a chaotic objective."""
 
 
 RIGID_WHERE_ZERO: Dict[str, Tuple[str, Tuple[str, ...]]] = {"backlash": ("contact_k", ("contact_k", "contact_c"))}
@@ -241,7 +255,8 @@ Progress = Callable[[Dict[str, Any]], None]
 PLAY_PARAMS = {"backlash": "gap"}
 PREDICT_REL = 1e-3
 """Relative change of a play (``PLAY_PARAMS``) whose effect on the replay sets the
-predictable horizon (:func:`popup.diagnosis.candidate.predictable_until`): about the 95 % resolution of a fitted gap."""
+predictable horizon (:func:`popup.diagnosis.candidate.predictable_until`): about the 95 %
+resolution of a fitted gap."""
 PREDICT_TOL = 0.3
 """RMS change [noise units] over one window, across channels, past which a replay is no
 longer predicted by its parameters (``AT_FLOOR``: what the floor test can tell)."""
