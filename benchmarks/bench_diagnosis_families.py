@@ -782,6 +782,31 @@ def _richer_law_took(row: Dict[str, Any]) -> bool:
     return not (math.isfinite(sec) and sec <= RICHER_LAW_SECONDS)
 
 
+#: Effects with play (``popup.diagnosis.rules.PLAY_PARAMS`` when the horizon step came),
+#: whose replay it checks for predictability: frozen with the PathTest that reads it.
+PLAY_EFFECTS = ("backlash",)
+
+
+def _horizon_took(row: Dict[str, Any]) -> bool:
+    """Whether the classification of ``row`` may depend on the horizon step (the change after
+    version ``49cefa2f99a6``, ``loop._unpredictable_top``). The step runs once, where round 1
+    found nothing significant, the pair step from none added nothing, and round 1's
+    best-ranked tested candidate is an effect with play whose continuation found its replay
+    unpredictable within the run; it then judges every candidate again on the samples
+    before that time. Elsewhere the change computes that time and nothing else (no fit, no
+    ranking reads it), and its new variant is tried only on a problem so cut. Read
+    conservatively: a result whose first round has no significant suspect and whose
+    best-ranked tested suspect is in :data:`PLAY_EFFECTS` took it."""
+    rounds = (row.get("json") or {}).get("rounds") or []
+    if not rounds or not isinstance(rounds[0], dict):
+        return False
+    ss = [s for s in rounds[0].get("suspects") or [] if isinstance(s, dict)]
+    if any(s.get("significant") for s in ss):
+        return False
+    top = next((s for s in ss if s.get("tested", True)), None)
+    return top is not None and top.get("effect") in PLAY_EFFECTS
+
+
 def _took(marker: Union[str, PathTest], row: Dict[str, Any]) -> bool:
     if isinstance(marker, PathTest):
         return marker.took(row)

@@ -774,6 +774,30 @@ def test_the_compliant_path_test_flags_every_result_that_fitted_compliant_flanks
     assert took({"truth": truth, "json": {"rounds": [], "notes": [], "history": [{"effects": ["backlash"], "variant": "compliant flanks"}]}})
 
 
+def test_the_horizon_path_test_flags_every_result_whose_first_round_a_play_led_with_nothing_significant():
+    """The PathTest of the horizon step (version 49cefa2f99a6's successor): the step runs
+    only where round 1 has no significant suspect and its best-ranked tested one is an effect
+    with play; every such result took it, and a result with anything significant in round 1
+    or another effect on top did not."""
+    took = bench._horizon_took
+    truth = _backlash_row([], [])["truth"]
+
+    def first(*suspects):
+        return {"truth": truth, "json": {"rounds": [{"suspects": [dict(s) for s in suspects]}, {"suspects": []}], "notes": []}}
+
+    bl = {"effect": "backlash", "significant": False, "tested": True}
+    hb = {"effect": "higher_bending_modes", "significant": False, "tested": True}
+    assert took(first(bl, hb))
+    assert took(first({"effect": "torsion", "significant": False, "tested": False}, bl, hb))  # an untested one is not ranked
+    assert not took(first(hb, bl))
+    assert not took(first(dict(hb, significant=True), bl))
+    assert not took(first(dict(bl, significant=True), hb))
+    assert not took(first())
+    assert not took({"truth": truth, "json": {"rounds": [], "notes": []}})
+    from popup.diagnosis.rules import PLAY_PARAMS
+    assert set(bench.PLAY_EFFECTS) == set(PLAY_PARAMS)  # one vocabulary, read by the bench as well
+
+
 def test_the_richer_law_path_test_flags_long_results_ending_with_an_effect_it_refits():
     """The PathTest of the richer-law step after the rounds (version 5d323d9b573b's
     successor): a result may depend on it only where its final model has an effect with a

@@ -419,7 +419,7 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
     cands = [np.concatenate([c, cur]) for c in cands]
     free_all = free + others
     iters = max(max_iter, MIN_ITER.get(name, 0))
-    at: Optional[Tuple[np.ndarray, float]] = None  # (the fit, the time) where the continuation found its replay unpredictable
+    unpredictable: Optional[float] = None  # where a fit of the continuation replays unpredictably [s]
     if name in SHORT_FIRST and seeds:
         # a lightly damped response (or a link side crossing its gap) drifts out of phase
         # over a long run, which makes the full-run objective a needle around the truth:
@@ -427,18 +427,18 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         # each from the last optimum (continuation), and offer the result as one more start
         tie = _shared_groups(free_all, name, shared)
         starts = list(cands)
-        xh, at = _continued(p, name, free_all, flat, starts, iters)
+        xh, unpredictable = _continued(p, name, free_all, flat, starts, iters)
         if xh is not None:
             cands.append(xh)
             if tie:
                 # the same with the ``shared`` parameters one value on every entry (half the
                 # unknowns): per entry, gaps and flanks trade off and the fit ends in a basin
                 # of its own; the shared optimum is one more start for the per-entry fit
-                xt, at_t = _continued(p, name, free_all, flat, starts, iters, tie)
+                xt, ut = _continued(p, name, free_all, flat, starts, iters, tie)
                 if xt is not None:
                     cands.append(xt)
-                    if at_t is not None and (at is None or at_t[1] < at[1]):
-                        at = at_t
+                    if ut is not None:
+                        unpredictable = ut if unpredictable is None else min(unpredictable, ut)
     xs, _ = est.best_start(p, free_all, flat, cands)
     out = est.fit(p, flat, free_all, xs, iters)
     z_null = None
@@ -449,7 +449,7 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         if not np.array_equal(nf, nb.model.effects_flat):
             z_null = nb.residuals(nb.simulate(nf))[0]
     fitted = _Fitted(name, variant, p, z_base, free_all, out, k=len(free) + k_extra, z_null=z_null)
-    fitted.unpredictable_after = None if at is None else at[1]
+    fitted.unpredictable_after = unpredictable
     return fitted, note
 
 
@@ -461,12 +461,13 @@ def _shared_groups(free: List[Tuple[fx.EffectParam, int]], name: str, shared: Op
 
 
 def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, cands: List[np.ndarray],
-               iters: int, tie: Optional[List[List[int]]] = None) -> Tuple[Optional[np.ndarray], Optional[Tuple[np.ndarray, float]]]:
+               iters: int, tie: Optional[List[List[int]]] = None) -> Tuple[Optional[np.ndarray], Optional[float]]:
     """The best of ``cands`` on a short horizon, fitted there and on horizons doubled in
-    turn, each from the last optimum (``tie``: with those groups fitted as one value); and,
-    where the check before a doubling found the fit's replay not predictable past a time
-    the next horizon reaches (:func:`predictable_until`), the fit then and that time [s]
-    (``None`` otherwise); ``(None, None)`` where the run is no longer than the short horizon."""
+    turn, each from the last optimum (``tie``: with those groups fitted as one value); and
+    the first time [s] past which a fit of the continuation replays unpredictably
+    (:func:`predictable_until`, checked before each doubling, kept where the next horizon
+    reaches it; ``None``: none did). ``(None, None)`` where the run is no longer than the
+    short horizon. The check changes no fit."""
     t0, t1 = float(p.time[0]), float(p.time[-1])
     h = max(SHORT_HORIZON_S, 0.2 * (t1 - t0))
     ph = p.with_horizon(t0 + h)
@@ -479,12 +480,12 @@ def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam,
     if name in COORDINATE_SEEDS:
         xh, unresolved = _coordinate_seeds(ph, name, free_all, flat, xh, _untied(free_all, name, tie))
     xh = est.fit(ph, flat, free_all, xh, iters, tie=tie).x
-    at: Optional[Tuple[np.ndarray, float]] = None
+    unpredictable: Optional[float] = None
     while True:
-        if at is None:
+        if unpredictable is None:
             hz = _horizon_of(p, name, free_all, flat, xh)
             if hz is not None and hz < min(t0 + 2.0 * h, t1):
-                at = (xh.copy(), hz)
+                unpredictable = hz
         if not 2.0 * h < t1 - t0:
             break
         h *= 2.0
@@ -497,7 +498,7 @@ def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam,
         xh = est.fit(ph, flat, free_all, xh, iters, mask=p.train[p.time <= t0 + h], tie=tie).x
     if unresolved:
         xh, _ = _coordinate_seeds(p, name, free_all, flat, xh, unresolved)
-    return xh, at
+    return xh, unpredictable
 
 
 def _horizon_of(p: ReplayProblem, name: str, free: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, x: np.ndarray) -> Optional[float]:
