@@ -36,16 +36,23 @@ def _load(f: Path) -> Dict[str, Any]:
 
 
 def remake(truth: Dict[str, Any], out: Path) -> Path:
-    """The run of ``truth`` made again under ``out`` from its family's seed and index; raises
-    ``ValueError`` where the truth made now differs from the stored one (a family drawn with
-    overrides, or a generator that changed since)."""
+    """The run of ``truth`` made again under ``out`` from its family's seed and index (drawn
+    as the bench draws it, or with the bench's ``--duration`` and ``--rates`` set to the
+    truth's duration and rate where the plain draw differs: the independent runs' format);
+    raises ``ValueError`` where the truth made now differs from the stored one (a family
+    drawn with other overrides, or a generator that changed since)."""
     i = int(truth["index"])
-    spec = F.family_specs(str(truth["family"]), str(truth["engine"]), i + 1, int(truth["seed"]), biases=bool(truth.get("biases")))[i]
-    path, now = F.make_run(spec, out)
-    # keys the generator added since the stored truth was made (``member_sigma``, session 65)
-    # describe the same run: compared only where the stored truth has them
-    now = {k: v for k, v in now.items() if k in truth or k not in LATER_KEYS}
-    a, b = json.dumps(now, sort_keys=True, default=str), json.dumps(truth, sort_keys=True, default=str)
+    b = json.dumps(truth, sort_keys=True, default=str)
+    a = ""
+    for ov in ({}, {"duration": float(truth.get("duration", 0.0)), "rates": [float(truth.get("rate", 0.0))]}):
+        spec = F.family_specs(str(truth["family"]), str(truth["engine"]), i + 1, int(truth["seed"]), biases=bool(truth.get("biases")), **ov)[i]
+        path, now = F.make_run(spec, out)
+        # keys the generator added since the stored truth was made (``member_sigma``, session 65)
+        # describe the same run: compared only where the stored truth has them
+        now = {k: v for k, v in now.items() if k in truth or k not in LATER_KEYS}
+        a = json.dumps(now, sort_keys=True, default=str)
+        if a == b:
+            break
     if a != b:
         keys = sorted(k for k in set(now) | set(truth) if json.dumps(now.get(k), sort_keys=True, default=str) != json.dumps(truth.get(k), sort_keys=True, default=str))
         raise ValueError(f"{path.name}: the truth made now differs from the stored one (seed {truth['seed']}, index {i}; "

@@ -870,6 +870,12 @@ def test_rerun_makes_a_run_again_from_its_seed_and_refuses_another_truth(tmp_pat
     assert (again / "measurements.csv").read_bytes() == (path / "measurements.csv").read_bytes()
     with pytest.raises(ValueError, match="differs from the stored one .*differing keys: noise_scale\\)"):
         rerun.remake({**truth, "noise_scale": truth["noise_scale"] * 2}, tmp_path / "other")
+    # a run drawn as the independent runs are (the bench's --duration 20 --rates 500) is made again too
+    sp20 = F.family_specs("nominal", "popup", 3, 19, duration=6.0, rates=[500.0])[2]
+    p20, t20 = F.make_run(sp20, tmp_path / "first20")
+    assert t20["duration"] == 6.0 and t20 != truth
+    again20 = rerun.remake(t20, tmp_path / "again20")
+    assert (again20 / "measurements.csv").read_bytes() == (p20 / "measurements.csv").read_bytes()
     seen = []
 
     def fake_row(p, t, cache, *, timeout, extra):

@@ -102,3 +102,51 @@ def test_the_horizon_is_where_a_play_0_1_percent_wider_is_told_apart(runs, gear)
         # a link side rattling between soft flanks is chaotic: the twin parts from it
         # within the run, by far more than the floor test can tell
         assert hz is not None and float(w.max()) > 3 * PREDICT_TOL, w
+
+
+def test_the_loop_asks_for_the_horizon_only_of_a_leading_play():
+    from types import SimpleNamespace
+
+    from popup.diagnosis.loop import _unpredictable_top
+    from popup.diagnosis.results import Suspect
+
+    def sus(effect, tested=True, after=None):
+        return Suspect(effect, False, 10.0, {}, {}, 1.0, 1.0, {}, {}, tested=tested, unpredictable_after=after)
+
+    assert _unpredictable_top(SimpleNamespace(suspects=[sus("backlash", after=5.0), sus("payload_mass")])) == 5.0
+    # an untested candidate is not ranked; another effect on top has no play to be unpredictable in
+    assert _unpredictable_top(SimpleNamespace(suspects=[sus("torsion", tested=False), sus("backlash", after=5.0)])) == 5.0
+    assert _unpredictable_top(SimpleNamespace(suspects=[sus("payload_mass"), sus("backlash", after=5.0)])) is None
+    assert _unpredictable_top(SimpleNamespace(suspects=[sus("backlash")])) is None
+    assert _unpredictable_top(SimpleNamespace(suspects=[])) is None
+
+
+def test_the_horizon_step_judges_the_nominal_model_and_every_candidate_before_it(nominal, tmp_path, monkeypatch):
+    """A disturbance outside the library leaves round 1 with nothing significant, above the
+    floor. With its best candidate's replay declared unpredictable past 6 s (what
+    ``_unpredictable_top`` reads from a rattling gear's continuation), the loop judges the
+    nominal model and every candidate on the samples before 6 s, once, and says so."""
+    from popup.diagnosis import loop
+    from popup.unseen import fit_unseen_motion
+
+    def disturbance(t):
+        return {"imu2_az": 0.8 * np.sin(2 * np.pi * 1.7 * t), "ee_z": 0.004 * np.sin(2 * np.pi * 1.7 * t + 0.5)}
+
+    t, q = popup.synth.lab_trajectory(10.0, seed=3)
+    run = popup.synth.measured_run(nominal, t, q, tmp_path / "disturbed", seed=3, disturbance=disturbance)
+    asked = []
+
+    def top(d):
+        asked.append(d)
+        return 6.0
+
+    monkeypatch.setattr(loop, "_unpredictable_top", top)
+    h = popup.improve(nominal, run, effects=["payload_mass", "air_drag"], max_rounds=2, threads=1)
+    assert len(asked) == 1 and len(h.diagnoses) == 2
+    assert all(s.horizon is None for s in h.diagnoses[0].suspects)
+    assert [s.horizon for s in h.diagnoses[1].suspects if s.tested] == [6.0, 6.0]
+    cut = fit_unseen_motion(ReplayProblem(nominal, run)).until(6.0)
+    assert h.steps[0].error == cut.error()[0] and h.steps[0].effects == []
+    assert h.diagnoses[1].nominal_error == h.steps[0].error
+    assert any(n.startswith("judged on t < 6 s from round 1 on") for n in h.notes), h.notes
+    assert "not explained by the library" in h.conclusion
