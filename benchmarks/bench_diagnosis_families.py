@@ -957,6 +957,24 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "(fam_rr72p_c4baab4)",
                      PathTest(_richer_law_took, "no effect with a richer law in the final model, or a diagnosis of at "
                               f"most {RICHER_LAW_SECONDS:g} s")),
+    "49cefa2f99a6": ("3f735fccd94c",
+                     "07d304c: the horizon step (loop._unpredictable_top): where round 1 finds nothing significant, "
+                     "the pair step from none adds nothing, the model is above its floor and round 1's best-ranked "
+                     "tested candidate is an effect with play whose continuation found its replay unpredictable "
+                     "past a time (candidate.predictable_until, a play 0.1 % wider moving the channels by more than "
+                     "0.3 noise units), every candidate and the nominal model are judged again before that time "
+                     "(ReplayProblem.until), with backlash's variant 'compliant flanks and link side' (on_horizon) "
+                     "tried there only; JSON suspects gain horizon_s and unpredictable_after_s",
+                     "elsewhere the change computes that time and nothing reads it: no fit, start or ranking "
+                     "changes, and the new variant is not tried (_horizon_took, read conservatively: round 1 with "
+                     "nothing significant and backlash its best-ranked tested suspect). Of the results counted "
+                     "with 49cefa2f99a6, two took it: MuJoCo backlash 802-000 and MuJoCo disturbance 640-000. "
+                     "Reruns on 07d304c and 0bb3c02 (session 75, this machine) of 22 results that did not take it: "
+                     "MuJoCo nominal seed 799 and popup nominal seed 801 (20 s at 500 Hz), MuJoCo friction 795-000 and "
+                     "popup disturbance 794-000, all bit-identical (equivalence.py; fam_rr75n_0bb3c02, "
+                     "fam_rr75e_07d304c); RERUNS",
+                     PathTest(_horizon_took, "round 1 with a significant suspect, or another effect than backlash "
+                              "its best-ranked tested one")),
 }
 
 

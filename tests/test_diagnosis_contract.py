@@ -1011,7 +1011,7 @@ def test_a_base_law_the_likelihood_favours_has_its_refinements_tried(monkeypatch
     class Fake:
         def __init__(self, variant, score, significant):
             self.variant, self.score, self.significant, self.unresolved, self.free, self.k = variant, score, significant, "", [], 1
-            self.unpinned = ""
+            self.unpinned, self.unpredictable_after = "", None
             # residual grids of their own (shape differs per fit): _gain compares scores
             self.out = types.SimpleNamespace(flat=np.zeros(n), z=np.zeros((len(calls), 1)))
             self.prob = types.SimpleNamespace(time=np.zeros(len(calls)))
@@ -1028,10 +1028,15 @@ def test_a_base_law_the_likelihood_favours_has_its_refinements_tried(monkeypatch
         return Fake(variant, -5.0, False), ""
 
     monkeypatch.setattr(dgc, "_fit_candidate", fake_fit)
-    s = dgc.try_effect(types.SimpleNamespace(nfev=0), "backlash", {}, 15)
+    s = dgc.try_effect(types.SimpleNamespace(nfev=0, horizon=None), "backlash", {}, 15)
     assert ("fitted link-side inertia" in calls) == tried_inertia, calls
     assert "held link side (play operator)" in calls  # an alternative law: tried either way
     assert (s.variant, s.significant) == (("fitted link-side inertia", True) if tried_inertia else ("", False)), s
+    # a variant marked on_horizon is tried only on a problem cut at its predictable horizon
+    assert "compliant flanks and link side" not in calls
+    calls.clear()
+    dgc.try_effect(types.SimpleNamespace(nfev=0, horizon=5.0), "backlash", {}, 15)
+    assert ("compliant flanks and link side" in calls) == tried_inertia, calls
 
 
 def _spectrum(rows):
