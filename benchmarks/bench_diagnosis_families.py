@@ -972,7 +972,11 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "Reruns on 07d304c and 0bb3c02 (session 75, this machine) of 22 results that did not take it: "
                      "MuJoCo nominal seed 799 and popup nominal seed 801 (20 s at 500 Hz), MuJoCo friction 795-000 and "
                      "popup disturbance 794-000, all bit-identical (equivalence.py; fam_rr75n_0bb3c02, "
-                     "fam_rr75e_07d304c); RERUNS",
+                     "fam_rr75e_07d304c); of the 2 that took it, MuJoCo disturbance 640-000 right (its backlash "
+                     "recorded no unpredictable time; the last bits differ, the old result was made on an AVX-512 "
+                     "machine; fam_rr75d_0bb3c02), and MuJoCo backlash 802-000 a miss again: the step ran, cut at "
+                     "5 s, and its round was stopped by the 3 600 s limit (one thread on shared cores; with the "
+                     "default threads and the same limit it added backlash, 12.4 -> 3.32; fam_rr75b_0bb3c02)",
                      PathTest(_horizon_took, "round 1 with a significant suspect, or another effect than backlash "
                               "its best-ranked tested one")),
 }
