@@ -125,7 +125,8 @@ def test_the_horizon_step_judges_the_nominal_model_and_every_candidate_before_it
     """A disturbance outside the library leaves round 1 with nothing significant, above the
     floor. With its best candidate's replay declared unpredictable past 6 s (what
     ``_unpredictable_top`` reads from a rattling gear's continuation), the loop judges the
-    nominal model and every candidate on the samples before 6 s, once, and says so."""
+    nominal model and every candidate on the samples before 6 s, once, and says so; the
+    pairs are tried only there, after the cut (not first on the whole run)."""
     from popup.diagnosis import loop
     from popup.unseen import fit_unseen_motion
 
@@ -140,9 +141,18 @@ def test_the_horizon_step_judges_the_nominal_model_and_every_candidate_before_it
         asked.append(d)
         return 6.0
 
+    pairs = []
+    pair_from_none = loop._pair_from_none
+
+    def pair(prob, *a, **kw):
+        pairs.append(prob.horizon)
+        return pair_from_none(prob, *a, **kw)
+
     monkeypatch.setattr(loop, "_unpredictable_top", top)
+    monkeypatch.setattr(loop, "_pair_from_none", pair)
     h = popup.improve(nominal, run, effects=["payload_mass", "air_drag"], max_rounds=2, threads=1)
     assert len(asked) == 1 and len(h.diagnoses) == 2
+    assert pairs == [6.0], pairs
     assert all(s.horizon is None for s in h.diagnoses[0].suspects)
     assert [s.horizon for s in h.diagnoses[1].suspects if s.tested] == [6.0, 6.0]
     cut = fit_unseen_motion(ReplayProblem(nominal, run)).until(6.0)

@@ -499,19 +499,11 @@ class ReplayProblem:
         references cut there, every kept sample a training one): a short horizon on which
         a lightly damped response has not yet drifted out of phase, so a fit's basin is
         wide (used for extra starts)."""
-        p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
         keep = self.time <= t_end
         if keep.sum() < 20:
             return self
-        p.time, p.measured = self.time[keep], self.measured[keep]
-        p.used = self.used[keep]
+        p = self._cut(keep, t_end)
         p.train, p.validation = p.used.copy(), np.zeros(int(keep.sum()), dtype=bool)
-        k_enc = self.t_enc <= t_end + 1e-9
-        if k_enc.sum() >= 5:
-            p.t_enc, p.q_enc, p.q_enc_raw = self.t_enc[k_enc], self.q_enc[k_enc], self.q_enc_raw[k_enc]
-            p.q_base, p.q_corr = self.q_base[k_enc], self.q_corr[k_enc]
-        if self.closed:
-            p.duration = min(self.duration, float(t_end - self.t0))
         return p
 
     def until(self, t_end: float) -> "ReplayProblem":
@@ -523,6 +515,13 @@ class ReplayProblem:
         keep = self.time < t_end
         if keep.all() or keep.sum() < 20:
             return self
+        p = self._cut(keep, t_end)
+        p.horizon = float(t_end)
+        return p
+
+    def _cut(self, keep: np.ndarray, t_end: float) -> "ReplayProblem":
+        """A copy on the measured samples ``keep`` (bool, one per sample), its split kept,
+        with the encoder and references cut at ``t_end`` [s]."""
         p = ReplayProblem(self.model, self.run, threads=self.threads, _parent=self)
         p.time, p.measured = self.time[keep], self.measured[keep]
         p.used, p.train, p.validation = self.used[keep], self.train[keep], self.validation[keep]
@@ -532,7 +531,6 @@ class ReplayProblem:
             p.q_base, p.q_corr = self.q_base[k_enc], self.q_corr[k_enc]
         if self.closed:
             p.duration = min(self.duration, float(t_end - self.t0))
-        p.horizon = float(t_end)
         return p
 
     def with_unseen_motion(self, compliance: Any, q_corr: np.ndarray) -> "ReplayProblem":

@@ -427,14 +427,14 @@ def _fit_candidate(prob: ReplayProblem, name: str, structure: Optional[Dict[str,
         # each from the last optimum (continuation), and offer the result as one more start
         tie = _shared_groups(free_all, name, shared)
         starts = list(cands)
-        xh, unpredictable = _continued(p, name, free_all, flat, starts, iters)
+        xh, unpredictable = _continued(p, name, free_all, flat, starts, iters, check=not others)
         if xh is not None:
             cands.append(xh)
             if tie:
                 # the same with the ``shared`` parameters one value on every entry (half the
                 # unknowns): per entry, gaps and flanks trade off and the fit ends in a basin
                 # of its own; the shared optimum is one more start for the per-entry fit
-                xt, ut = _continued(p, name, free_all, flat, starts, iters, tie)
+                xt, ut = _continued(p, name, free_all, flat, starts, iters, tie, check=not others)
                 if xt is not None:
                     cands.append(xt)
                     if ut is not None:
@@ -461,13 +461,14 @@ def _shared_groups(free: List[Tuple[fx.EffectParam, int]], name: str, shared: Op
 
 
 def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam, int]], flat: np.ndarray, cands: List[np.ndarray],
-               iters: int, tie: Optional[List[List[int]]] = None) -> Tuple[Optional[np.ndarray], Optional[float]]:
+               iters: int, tie: Optional[List[List[int]]] = None, check: bool = True) -> Tuple[Optional[np.ndarray], Optional[float]]:
     """The best of ``cands`` on a short horizon, fitted there and on horizons doubled in
     turn, each from the last optimum (``tie``: with those groups fitted as one value); and
     the first time [s] past which a fit of the continuation replays unpredictably
     (:func:`predictable_until`, checked before each doubling, kept where the next horizon
-    reaches it; ``None``: none did). ``(None, None)`` where the run is no longer than the
-    short horizon. The check changes no fit."""
+    reaches it; ``None``: none did, or ``check`` is false: only a candidate fitted with no
+    effect beside it is checked, the horizon step reads round 1 only). ``(None, None)`` where
+    the run is no longer than the short horizon. The check changes no fit."""
     t0, t1 = float(p.time[0]), float(p.time[-1])
     h = max(SHORT_HORIZON_S, 0.2 * (t1 - t0))
     ph = p.with_horizon(t0 + h)
@@ -482,7 +483,7 @@ def _continued(p: ReplayProblem, name: str, free_all: List[Tuple[fx.EffectParam,
     xh = est.fit(ph, flat, free_all, xh, iters, tie=tie).x
     unpredictable: Optional[float] = None
     while True:
-        if unpredictable is None:
+        if unpredictable is None and check:
             hz = _horizon_of(p, name, free_all, flat, xh)
             if hz is not None and hz < min(t0 + 2.0 * h, t1):
                 unpredictable = hz

@@ -220,20 +220,14 @@ def _improve(
                     stage, stage_round = f"swap {added[0]} for a pair: ", rnd + 1
                     pr = _try_pair(prob, run, cprob, added[0], fitted_params, hints, diags, effects, threads, max_iter, prog, notes)
                     stage = ""
-                if pr is None and lw is None and not added and not step_at_floor(steps[-1], prob):
-                    # nothing added and a systematic error left: two effects may each replay
-                    # worse alone than neither (a sensor delay beside a bending law that
-                    # moves the phase of the channels it shares: MuJoCo pair, session 34)
-                    stage, stage_round = "a pair: ", rnd + 1
-                    pr = _pair_from_none(prob, run, cprob, _hints(d), d, diags, effects, threads, max_iter, prog, notes)
-                    stage = ""
-                hz = _unpredictable_top(d) if pr is None and lw is None and not added and prob.horizon is None else None
+                hz = _unpredictable_top(d) if not added and prob.horizon is None else None
                 if hz is not None and not step_at_floor(steps[-1], prob):
                     # nothing significant, and the best candidate's replay is not predictable
                     # past hz (a gear rattling in its play: a play PREDICT_REL wider parts
                     # from it there by more than the floor test tells): no free-run error past
                     # hz can judge it, the truth's own law included, so every candidate and
-                    # the nominal model are judged before hz (MuJoCo 802-000, session 74)
+                    # the nominal model are judged before hz (MuJoCo 802-000, session 74),
+                    # before any pair is tried (the pairs are tried on the cut, where it finds none)
                     prob, cprob = prob.until(hz), cprob.until(hz)
                     steps[:] = [_step(prob, [], {}, 0)]
                     notes.append(f"judged on t < {hz:.3g} s from round {rnd + 1} on: past it the replay of the best candidate, {d.suspects[0].effect}, "
@@ -242,6 +236,13 @@ def _improve(
                     d = diagnose(current, run, effects=effects, threads=threads, max_iter=max_iter, problem=cprob, progress=prog, rank_at_floor=rank_at_floor)
                     diags.append(d)
                     continue
+                if pr is None and lw is None and not added and not step_at_floor(steps[-1], prob):
+                    # nothing added and a systematic error left: two effects may each replay
+                    # worse alone than neither (a sensor delay beside a bending law that
+                    # moves the phase of the channels it shares: MuJoCo pair, session 34)
+                    stage, stage_round = "a pair: ", rnd + 1
+                    pr = _pair_from_none(prob, run, cprob, _hints(d), d, diags, effects, threads, max_iter, prog, notes)
+                    stage = ""
                 if lw is not None:
                     c, current, cprob, ci, fitted_params, d_new = lw
                     added.append(c)
