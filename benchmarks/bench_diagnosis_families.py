@@ -979,6 +979,17 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "default threads and the same limit it added backlash, 12.4 -> 3.32; fam_rr75b_0bb3c02)",
                      PathTest(_horizon_took, "round 1 with a significant suspect, or another effect than backlash "
                               "its best-ranked tested one")),
+    "3f735fccd94c": ("0cf99bd1bc04",
+                     "1db863e: the horizon step runs before the pair step from none (that step is tried on the cut, "
+                     "where the cut round finds nothing significant); the predictability check runs only for a "
+                     "candidate fitted with no effect beside it (the step reads round 1 only); ReplayProblem.until "
+                     "and with_horizon share _cut (the same arrays)",
+                     "the order changes only where the horizon step runs, which _horizon_took reads conservatively "
+                     "(round 1 with nothing significant and backlash its best-ranked tested suspect); the check it "
+                     "no longer makes in later rounds set only unpredictable_after_s, which nothing reads. "
+                     "RERUNS",
+                     PathTest(_horizon_took, "round 1 with a significant suspect, or another effect than backlash "
+                              "its best-ranked tested one")),
 }
 
 
