@@ -987,7 +987,9 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "the order changes only where the horizon step runs, which _horizon_took reads conservatively "
                      "(round 1 with nothing significant and backlash its best-ranked tested suspect); the check it "
                      "no longer makes in later rounds set only unpredictable_after_s, which nothing reads. "
-                     "RERUNS",
+                     "Reruns on 1db863e (session 76, this machine) of 22 results that did not take it: MuJoCo nominal "
+                     "seed 799 and popup nominal seed 801 (20 s at 500 Hz), MuJoCo friction 795-000 and popup "
+                     "disturbance 794-000, all bit-identical (equivalence.py; fam_rr76n_1db863e, fam_rr76e_1db863e)",
                      PathTest(_horizon_took, "round 1 with a significant suspect, or another effect than backlash "
                               "its best-ranked tested one")),
 }
