@@ -989,7 +989,11 @@ CARRIED_FORWARD: Dict[str, Tuple[str, str, str, Union[str, PathTest]]] = {
                      "no longer makes in later rounds set only unpredictable_after_s, which nothing reads. "
                      "Reruns on 1db863e (session 76, this machine) of 22 results that did not take it: MuJoCo nominal "
                      "seed 799 and popup nominal seed 801 (20 s at 500 Hz), MuJoCo friction 795-000 and popup "
-                     "disturbance 794-000, all bit-identical (equivalence.py; fam_rr76n_1db863e, fam_rr76e_1db863e)",
+                     "disturbance 794-000, all bit-identical (equivalence.py; fam_rr76n_1db863e, fam_rr76e_1db863e); "
+                     "of the 2 counted with 3f735fccd94c that took it, MuJoCo disturbance 640-000 right and "
+                     "bit-identical (fam_rr76d_1db863e) and MuJoCo backlash 802-000, a miss there, right: the step "
+                     "cut at 5 s before any pair was tried and added backlash, 12.4 -> 3.32, complete in 2 407 s on "
+                     "one thread (fam_rr76b_1db863e)",
                      PathTest(_horizon_took, "round 1 with a significant suspect, or another effect than backlash "
                               "its best-ranked tested one")),
 }
