@@ -160,3 +160,22 @@ def test_the_horizon_step_judges_the_nominal_model_and_every_candidate_before_it
     assert h.diagnoses[1].nominal_error == h.steps[0].error
     assert any(n.startswith("judged on t < 6 s from round 1 on") for n in h.notes), h.notes
     assert "not explained by the library" in h.conclusion
+
+
+def test_only_a_candidate_fitted_alone_is_checked_for_its_horizon(nominal, runs, monkeypatch):
+    """The horizon step reads round 1 only, so a candidate fitted with an earlier effect
+    refitted beside it (round 2 on, the pair steps) is not checked: the check's two
+    rollouts per doubling would be spent where nothing reads them."""
+    from popup import estimate as est
+    from popup.diagnosis import candidate
+
+    _, run = runs["rigid flanks"]
+    p = ReplayProblem(nominal, run)
+    checked = []
+    monkeypatch.setattr(candidate, "_horizon_of", lambda *a: checked.append(a[1]))
+    assert "payload_mass" in candidate.SHORT_FIRST
+    candidate._fit_candidate(p, "payload_mass", None, None, None, None, 3)
+    alone = list(checked)
+    checked.clear()
+    candidate._fit_candidate(p, "payload_mass", None, None, None, None, 3, also=est.free_params("air_drag"))
+    assert alone and set(alone) == {"payload_mass"} and checked == []
